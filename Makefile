@@ -1,0 +1,47 @@
+# make demo: install everything, run the demo.   make test: install everything, run all tests.
+VENV   := .venv
+PY     := $(VENV)/bin/python
+PIP    := $(PY) -m pip
+# One persistent build tree serves pip (incremental rebuilds) and ctest.
+BUILD  := build/py
+PIP_BUILD_FLAGS := --no-build-isolation -C build-dir=$(BUILD) -C cmake.define.RSCALIB_BUILD_TESTS=ON
+
+.PHONY: all deps venv install test test-cpp test-python demo bench stubs clean
+
+all: install
+
+deps:
+	bash scripts/install-system-deps.sh
+
+$(VENV)/.deps-stamp: pyproject.toml
+	test -x $(PY) || python3 -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+	$(PIP) install -q "scikit-build-core>=0.10" "pybind11>=2.12" "cmake>=3.22" ninja "pytest>=7" \
+	  "numpy>=1.24" "scipy>=1.10" "opencv-python-headless>=4.8,<5" "matplotlib>=3.7" "rich>=13" "pyyaml>=6"
+	touch $@
+
+venv: $(VENV)/.deps-stamp
+
+install: deps venv
+	$(PIP) install -q $(PIP_BUILD_FLAGS) .
+
+test-cpp: install
+	$(VENV)/bin/ctest --test-dir $(BUILD) --output-on-failure -j2
+
+test-python: install
+	$(PY) -m pytest -q tests/python
+
+test: test-cpp test-python
+
+demo: install
+	$(VENV)/bin/rscalib demo
+
+bench: install
+	$(PY) benchmarks/bench_spline.py
+
+stubs: install
+	$(PIP) install -q pybind11-stubgen
+	$(VENV)/bin/pybind11-stubgen rscalib._core -o python --numpy-array-use-type-var
+
+clean:
+	rm -rf build $(VENV)

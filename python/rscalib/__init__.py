@@ -1,0 +1,36 @@
+"""rscalib: camera calibration from video.
+
+Rolling-shutter line-delay calibration (Oth et al. 2013) and sequential self-calibration
+(Civera et al. 2009) on a C++ core. Frames, time and pixel conventions: docs/conventions.md.
+"""
+from importlib.metadata import PackageNotFoundError, version as _version
+
+from ._core import (
+    BSpline,
+    CameraModel,
+    fit_bspline,
+    poses_at,
+    rotation_matrix_to_vector,
+    rotation_vector_to_matrix,
+    unwrap_rotation_vectors,
+)
+from .errors import InputError
+from .observations import Observations
+
+try:
+    __version__ = _version("rscalib")
+except PackageNotFoundError:  # running from a source tree without metadata
+    from ._core import __version__
+
+__all__ = [
+    "BSpline",
+    "CameraModel",
+    "InputError",
+    "Observations",
+    "fit_bspline",
+    "poses_at",
+    "rotation_matrix_to_vector",
+    "rotation_vector_to_matrix",
+    "unwrap_rotation_vectors",
+    "__version__",
+]

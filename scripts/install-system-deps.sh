@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# Installs the Debian packages rscalib builds against. Idempotent: apt runs only when
+# something is missing. Needs root (or sudo) on Debian/Ubuntu.
+set -euo pipefail
+
+packages=(g++ make libceres-dev libeigen3-dev libsuitesparse-dev libgtest-dev)
+python3 -c "import venv, ensurepip" 2>/dev/null || packages+=(python3-venv)
+command -v python3 >/dev/null || packages+=(python3 python3-dev python3-venv)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "system packages: all present"
+  exit 0
+fi
+echo "system packages: installing ${missing[*]}"
+sudo=""
+[ "$(id -u)" -eq 0 ] || sudo="sudo"
+export DEBIAN_FRONTEND=noninteractive
+$sudo apt-get update -qq
+$sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
