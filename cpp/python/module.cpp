@@ -24,4 +24,5 @@ PYBIND11_MODULE(_core, m) {
   py::register_exception<rscalib::InputError>(m, "InputError", PyExc_ValueError);
   rscalib::python::BindSpline(m);
   rscalib::python::BindCamera(m);
+  rscalib::python::BindRs(m);
 }

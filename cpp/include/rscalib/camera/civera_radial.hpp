@@ -9,6 +9,7 @@
 // params layout (5): [f, Cx, Cy, k1 (mm^-2), k2 (mm^-4)]; the pixel size is a constant.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "rscalib/core/scalar.hpp"
 
@@ -47,26 +48,64 @@ struct CiveraRadial {
       return true;
     }
     const double k1 = ScalarValue(params[3]), k2 = ScalarValue(params[4]);
-    const double ru = std::sqrt(ru2_value);
-    double rd = ru;
-    for (int iteration = 0; iteration < 50; ++iteration) {
-      const double rd2 = rd * rd;
-      const double g = rd * (1.0 + rd2 * (k1 + rd2 * k2)) - ru;
-      const double dg = 1.0 + rd2 * (3.0 * k1 + 5.0 * k2 * rd2);
-      if (!(dg > 0.0)) return false;
-      const double step = g / dg;
-      rd -= step;
-      if (std::abs(step) <= 1e-15 * std::max(1.0, ru)) break;
-    }
+    double rd = 0.0;
+    if (!SolveDistortedRadius(k1, k2, std::sqrt(ru2_value), &rd)) return false;
     const double rd2 = rd * rd;
     const double dg = 1.0 + rd2 * (3.0 * k1 + 5.0 * k2 * rd2);
-    if (!(dg > 0.0) || !(rd > 0.0)) return false;
     const T ru_t = sqrt(ru2);
     const T g_t = T(rd) * (T(1.0) + T(rd2) * (params[3] + T(rd2) * params[4])) - ru_t;
     const T rd_t = T(rd) - g_t / dg;  // value rd, first derivatives exact
     const T scale = rd_t / ru_t;     // = 1 / (1 + k1 rd^2 + k2 rd^4)
     uv_d[0] = params[1] + du * scale;
     uv_d[1] = params[2] + dv * scale;
+    return true;
+  }
+
+  // r_d with r_d (1 + k1 r_d^2 + k2 r_d^4) = r_u on the rising branch from r_d = 0 (where
+  // the model is invertible): Newton kept inside a bisection bracket [0, r_peak].
+  static bool SolveDistortedRadius(double k1, double k2, double ru, double* rd_out) {
+    const auto g = [&](double r) { const double r2 = r * r; return r * (1.0 + r2 * (k1 + r2 * k2)) - ru; };
+    const auto dg = [&](double r) { const double r2 = r * r; return 1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2); };
+    // Upper end of the bracket: the first zero of dg (r_peak), or a radius where g > 0.
+    double hi = std::max(ru, 1e-12);
+    if (k2 < 0.0 || k1 < 0.0) {
+      // dg(r) = 1 + 3 k1 s + 5 k2 s^2 with s = r^2: smallest positive root, if any.
+      double peak_s = std::numeric_limits<double>::infinity();
+      if (k2 != 0.0) {
+        const double disc = 9.0 * k1 * k1 - 20.0 * k2;
+        if (disc >= 0.0) {
+          for (double sign : {-1.0, 1.0}) {
+            const double s_root = (-3.0 * k1 + sign * std::sqrt(disc)) / (10.0 * k2);
+            if (s_root > 0.0) peak_s = std::min(peak_s, s_root);
+          }
+        }
+      } else if (k1 < 0.0) {
+        peak_s = -1.0 / (3.0 * k1);
+      }
+      if (std::isfinite(peak_s)) {
+        hi = std::sqrt(peak_s);
+        if (g(hi) < 0.0) return false;  // r_u beyond the largest distorted radius
+      }
+    }
+    for (int doubling = 0; g(hi) < 0.0; ++doubling) {
+      if (doubling > 200) return false;
+      hi *= 2.0;
+    }
+    double lo = 0.0, rd = std::min(ru, hi);
+    for (int iteration = 0; iteration < 100; ++iteration) {
+      const double value = g(rd);
+      if (value < 0.0) lo = rd; else hi = rd;
+      const double slope = dg(rd);
+      double next = rd - value / slope;
+      if (!(slope > 0.0) || !(next > lo && next < hi)) next = 0.5 * (lo + hi);
+      if (std::abs(next - rd) <= 1e-15 * std::max(1.0, ru) || hi - lo <= 1e-15 * std::max(1.0, ru)) {
+        rd = next;
+        break;
+      }
+      rd = next;
+    }
+    if (!(std::abs(g(rd)) <= 1e-12 * std::max(1.0, ru)) || !(dg(rd) > 0.0)) return false;
+    *rd_out = rd;
     return true;
   }
 
