@@ -25,41 +25,39 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from ._core import BSpline, CameraModel, fit_bspline, poses_at, unwrap_rotation_vectors
+    from . import simulate
+    from ._core import CameraModel
+    from .linedelay import calibrate_line_delay
 
     started = time.perf_counter()
-    # A hand-held-like pose sampled at 30 fps for 4 s, with the rotation vector crossing pi.
-    times = np.arange(0.0, 4.0, 1 / 30)
-    position = np.c_[0.05 * np.sin(2.1 * times), 0.03 * np.cos(1.3 * times), 0.6 + 0.02 * np.sin(3 * times)]
-    angle = 2.9 + 0.25 * np.sin(1.7 * times)
-    axis = np.array([0.2, 1.0, 0.1]) / np.linalg.norm([0.2, 1.0, 0.1])
-    rotvec = angle[:, None] * axis
-    wrapped = np.where(angle[:, None] > np.pi, rotvec * (angle[:, None] - 2 * np.pi) / angle[:, None], rotvec)
-    unwrapped = unwrap_rotation_vectors(wrapped)
-    knots = BSpline.clamped_knots(np.linspace(times[0], times[-1], 9))
-    spline = fit_bspline(knots, times, np.c_[position, unwrapped], acceleration_weight=[1e-6])
-    fit_error = np.abs(spline.evaluate(times) - np.c_[position, rotvec]).max()
-    n_ins = 8
-    for t in np.linspace(times[0], times[-1], n_ins + 2)[1:-1] + 0.01:
-        spline.insert_knot(t)
-    insert_change = np.abs(spline.evaluate(times) - np.c_[position, rotvec]).max() - fit_error
-    camera = CameraModel("pinhole-radtan", [500, 500, 319.5, 239.5, -0.1, 0.05, 0, 0, 0], 640, 480)
-    cols, rows = np.meshgrid(np.arange(9), np.arange(6))
-    target = np.c_[cols.ravel() * 0.04 - 0.16, rows.ravel() * 0.04 - 0.10, np.zeros(54)]
-    rotations, translations = poses_at(spline, times)
-    points_c = np.einsum("fij,pj->fpi", rotations, target) + translations[:, None, :]
-    uv = camera.project(points_c.reshape(-1, 3))
-    elapsed = time.perf_counter() - started
-    print(f"rscalib {__version__} demo (foundation): C++ core exercised end to end")
-    print(f"  rotation vectors unwrapped across pi: max jump {np.abs(np.diff(wrapped, axis=0)).max():.2f} rad "
-          f"-> {np.abs(np.diff(unwrapped, axis=0)).max():.3f} rad")
-    print(f"  smoothing spline fitted to {len(times)} poses with 8 segments: max error {fit_error:.2e}")
-    print(f"  {n_ins} knots inserted (Boehm), curve change {abs(insert_change):.1e}; now {spline.num_segments} segments")
-    print(f"  projected a 9x6 target from {len(times)} spline poses: {np.isfinite(uv[:, 0]).sum()} pixels, "
-          f"u in [{np.nanmin(uv[:, 0]):.1f}, {np.nanmax(uv[:, 0]):.1f}], v in [{np.nanmin(uv[:, 1]):.1f}, {np.nanmax(uv[:, 1]):.1f}]")
-    print(f"  took {elapsed * 1e3:.1f} ms")
+    line_delay_s = args.line_delay_us * 1e-6
+    sim = simulate.simulate_default(line_delay_s=line_delay_s, duration_s=args.duration, seed=args.seed,
+                                    noise_px=args.noise)
+    c = sim.camera
+    camera = CameraModel(c.model, c.params, c.width, c.height)
+    obs = sim.observations
+    print(f"rscalib {__version__} demo: simulated {args.duration:.0f} s of hand-held 30 fps video of a 9x6 "
+          f"checkerboard, {c.width}x{c.height}, rolling shutter d = {line_delay_s * 1e6:.2f} us/row, "
+          f"{args.noise} px detection noise")
+    print(f"  {obs.num_frames} frames, {obs.num_observations} corner observations "
+          "(exact rolling-shutter projection, seed {})".format(args.seed))
+
+    def report(r) -> None:
+        print(f"  round {r.round}: {r.segments:4d} knot segments, d = {r.line_delay_s * 1e6:9.3f} us, "
+              f"J/2N = {r.normalised_cost:8.3f}, {r.segments_split} segments split, "
+              f"{r.segments_at_cap} at the density cap ({r.solve_time_s:.2f} s)")
+
+    result = calibrate_line_delay(obs, camera, progress=report)
+    error = result.line_delay_s - line_delay_s
+    print(f"  truth     d = {line_delay_s * 1e6:.3f} us/row  (readout {line_delay_s * c.height * 1e3:.3f} ms)")
+    print(f"  estimate  d = {result.line_delay_s * 1e6:.3f} +- {result.line_delay_std_s * 1e6:.3f} us/row "
+          f"(readout {result.readout_time_s * 1e3:.3f} ms)")
+    print(f"  error {error * 1e6:+.3f} us = {error / result.line_delay_std_s:+.2f} sigma; "
+          f"pixel sigma {result.pixel_sigma:.3f} px (estimated), J/2N {result.normalised_cost:.3f}, "
+          f"rms {result.rms_px:.3f} px, {result.num_segments} segments")
+    for w in result.warnings:
+        print(f"  warning: {w}")
+    print(f"  took {time.perf_counter() - started:.1f} s")
     return EXIT_OK
 
 
@@ -70,6 +68,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     demo = sub.add_parser("demo", help="run the built-in demonstration (no arguments needed)",
                           description="Run the built-in demonstration on synthetic data.")
+    demo.add_argument("--line-delay-us", type=float, default=30.0, help="true line delay in us/row (30)")
+    demo.add_argument("--duration", type=float, default=10.0, help="seconds of video (10)")
+    demo.add_argument("--noise", type=float, default=0.3, help="detection noise in px (0.3)")
+    demo.add_argument("--seed", type=int, default=0, help="random seed of the motion and noise (0)")
     demo.set_defaults(func=_cmd_demo)
     return parser
 

@@ -29,6 +29,7 @@ PAPER_MOTION_PRIOR_Q = (1e-5, 1e-5, 1e-5, 1e-2, 1e-2, 1e-2)
 # Rounds before the last are re-solved after knot insertion anyway: solve them loosely.
 _ROUND_MAX_ITERATIONS = 30
 _ROUND_FUNCTION_TOLERANCE = 1e-6
+_HOLD_LINE_DELAY_ABOVE_COST = 10.0 # J/2N above which d is held at d0 during knot adaptation
 # The line delay counts as determined when its standard deviation is below this fraction
 # of the nominal full-frame delay 1 / (fps * rows) (a readout-time error of 5 % of a frame).
 UNDETERMINED_STD_FRACTION = 0.05
@@ -45,6 +46,7 @@ class RoundRecord:
     normalised_cost: float
     rms_px: float
     segments_split: int
+    segments_at_cap: int              # over their expected cost but already min_segment_s long
     iterations: int
     solve_time_s: float
 
@@ -145,14 +147,20 @@ def initial_trajectory(observations: Observations, poses: FramePoses, line_delay
     return _core.fit_bspline(knots, times, samples, acceleration_weight=[acceleration_weight])
 
 
-def _split_segments(trajectory: BSpline, segment_cost, segment_count, min_segment_s: float) -> list[float]:
-    """Midpoints of the segments with J_j >= 2 N_j (paper §4.3 step 5) that are long enough."""
+def _split_segments(trajectory: BSpline, segment_cost, segment_count, min_segment_s: float,
+                    margin_sigmas: float) -> tuple[list[float], int]:
+    """Midpoints of the segments with J_j >= 2 N_j + margin * sqrt(4 N_j) (paper §4.3 step 5
+    with margin 0) that are long enough to halve, and the number of segments over that
+    threshold but already at the density cap."""
     breaks = trajectory.breakpoints
-    new_knots = []
+    new_knots, at_cap = [], 0
     for j, (cost, count) in enumerate(zip(segment_cost, segment_count)):
-        if count > 0 and cost >= 2.0 * count and breaks[j + 1] - breaks[j] >= 2.0 * min_segment_s:
-            new_knots.append(0.5 * (breaks[j] + breaks[j + 1]))
-    return new_knots
+        if count > 0 and cost >= 2.0 * count + margin_sigmas * math.sqrt(4.0 * count):
+            if breaks[j + 1] - breaks[j] >= 2.0 * min_segment_s:
+                new_knots.append(0.5 * (breaks[j] + breaks[j + 1]))
+            else:
+                at_cap += 1
+    return new_knots, at_cap
 
 
 def _prepare(observations: Observations, camera: CameraModel, rows: Optional[int]):
@@ -186,6 +194,7 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                          adaptive_knots: bool = True,
                          max_rounds: int = 8,
                          min_segment_s: Optional[float] = None,
+                         split_margin_sigmas: float = 2.0,
                          standardise_errors: bool = True,
                          use_motion_prior: bool = True,
                          motion_prior_q=DEFAULT_MOTION_PRIOR_Q,
@@ -199,12 +208,16 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
     (default: estimated from the data, see rscalib.noise). num_segments fixes uniform knots
     (with adaptive_knots=False, for experiments). min_segment_s: shortest segment the
     adaptation may create (default: one frame interval); initial_segments_per_s: uniform
-    knots to start from (default fps/4, deliberately too few). progress: called after each round.
+    knots to start from (default fps/4, deliberately too few). split_margin_sigmas:
+    a segment splits when J_j >= 2 N_j + margin * sqrt(4 N_j); 0 is the paper's rule, which
+    also splits ~1/3 of well-modelled segments by chance (docs/formulation.md §7).
+    progress: called after each round.
     """
     return _run(observations, camera, rows, estimate=True, pixel_sigma=pixel_sigma,
                 line_delay_s=line_delay0_s, initial_segments_per_s=initial_segments_per_s,
                 num_segments=num_segments, adaptive_knots=adaptive_knots, max_rounds=max_rounds,
-                min_segment_s=min_segment_s, standardise_errors=standardise_errors,
+                min_segment_s=min_segment_s, split_margin_sigmas=split_margin_sigmas,
+                standardise_errors=standardise_errors,
                 use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
                 robust_loss=robust_loss, num_threads=num_threads, progress=progress)
 
@@ -220,7 +233,7 @@ def localize(observations: Observations, camera: CameraModel, rows: Optional[int
 
 def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s=None,
          initial_segments_per_s=None, num_segments=None, adaptive_knots=True, max_rounds=8,
-         min_segment_s=None, standardise_errors=True, use_motion_prior=True,
+         min_segment_s=None, split_margin_sigmas=2.0, standardise_errors=True, use_motion_prior=True,
          motion_prior_q=DEFAULT_MOTION_PRIOR_Q, robust_loss="none", num_threads=2,
          progress=None) -> LineDelayResult:
     started = time.perf_counter()
@@ -272,18 +285,29 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     summary = None
     options.max_iterations = _ROUND_MAX_ITERATIONS
     options.function_tolerance = _ROUND_FUNCTION_TOLERANCE
+    # While the trajectory is far too stiff to explain the data (J/2N large) d would only
+    # absorb the misfit, and the solve wanders: hold d at its start value until then.
+    initial = _core.evaluate_line_delay(*args, trajectory, d, options)
+    hold_d = estimate and initial.measurement_cost > _HOLD_LINE_DELAY_ABOVE_COST * 2 * max(1, initial.num_error_terms)
     for round_index in range(max(1, max_rounds)):
         last_chance = round_index == max_rounds - 1
+        options.estimate_line_delay = estimate and not hold_d
         summary = _core.solve_line_delay(*args, trajectory, d, options)
         d = summary.line_delay_s
         cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
-        new_knots = [] if not adaptive_knots else _split_segments(
-            trajectory, summary.segment_cost, summary.segment_count, min_segment_s)
+        new_knots, at_cap = _split_segments(trajectory, summary.segment_cost, summary.segment_count,
+                                            min_segment_s, split_margin_sigmas) if adaptive_knots else ([], 0)
         record = RoundRecord(round_index, trajectory.num_segments, d, float("nan"), cost, summary.rms_px,
-                             0 if last_chance else len(new_knots), summary.iterations, summary.solve_time_s)
+                             0 if last_chance else len(new_knots), at_cap, summary.iterations,
+                             summary.solve_time_s)
         history.append(record)
         if progress:
             progress(record)
+        if hold_d and (cost < _HOLD_LINE_DELAY_ABOVE_COST or not new_knots):
+            hold_d = False
+            if not new_knots:  # solve once more with d free on these knots
+                history[-1].segments_split = 0
+                continue
         if not new_knots:
             adapted = True
             break
@@ -299,6 +323,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     options.max_iterations = 100
     options.function_tolerance = 1e-9
     options.compute_covariance = estimate
+    options.estimate_line_delay = estimate
     summary = _core.solve_line_delay(*args, trajectory, d, options)
     d = summary.line_delay_s
     std = summary.line_delay_std_s if estimate else 0.0
