@@ -22,8 +22,10 @@ $(VENV)/.deps-stamp: pyproject.toml
 
 venv: $(VENV)/.deps-stamp
 
+# flock: several shells may install at once while developing; one build tree, one at a time.
 install: deps venv
-	$(PIP) install -q $(PIP_BUILD_FLAGS) .
+	@mkdir -p build
+	flock build/.install.lock $(PIP) install -q $(PIP_BUILD_FLAGS) .
 
 test-cpp: install
 	$(VENV)/bin/ctest --test-dir $(BUILD) --output-on-failure -j2

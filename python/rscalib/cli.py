@@ -7,14 +7,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 
 from . import __version__
+from .commands import COMMAND_MODULES
 from .errors import InputError
 
-EXIT_OK = 0
-EXIT_BAD_INPUT = 2
-EXIT_UNDETERMINED = 3
+from .commands.common import EXIT_BAD_INPUT, EXIT_OK, EXIT_UNDETERMINED  # noqa: F401  (re-exported)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -24,55 +22,13 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
-    from . import simulate
-    from ._core import CameraModel
-    from .linedelay import calibrate_line_delay
-
-    started = time.perf_counter()
-    line_delay_s = args.line_delay_us * 1e-6
-    sim = simulate.simulate_default(line_delay_s=line_delay_s, duration_s=args.duration, seed=args.seed,
-                                    noise_px=args.noise)
-    c = sim.camera
-    camera = CameraModel(c.model, c.params, c.width, c.height)
-    obs = sim.observations
-    print(f"rscalib {__version__} demo: simulated {args.duration:.0f} s of hand-held 30 fps video of a 9x6 "
-          f"checkerboard, {c.width}x{c.height}, rolling shutter d = {line_delay_s * 1e6:.2f} us/row, "
-          f"{args.noise} px detection noise")
-    print(f"  {obs.num_frames} frames, {obs.num_observations} corner observations "
-          "(exact rolling-shutter projection, seed {})".format(args.seed))
-
-    def report(r) -> None:
-        print(f"  round {r.round}: {r.segments:4d} knot segments, d = {r.line_delay_s * 1e6:9.3f} us, "
-              f"J/2N = {r.normalised_cost:8.3f}, {r.segments_split} segments split, "
-              f"{r.segments_at_cap} at the density cap ({r.solve_time_s:.2f} s)")
-
-    result = calibrate_line_delay(obs, camera, progress=report)
-    error = result.line_delay_s - line_delay_s
-    print(f"  truth     d = {line_delay_s * 1e6:.3f} us/row  (readout {line_delay_s * c.height * 1e3:.3f} ms)")
-    print(f"  estimate  d = {result.line_delay_s * 1e6:.3f} +- {result.line_delay_std_s * 1e6:.3f} us/row "
-          f"(readout {result.readout_time_s * 1e3:.3f} ms)")
-    print(f"  error {error * 1e6:+.3f} us = {error / result.line_delay_std_s:+.2f} sigma; "
-          f"pixel sigma {result.pixel_sigma:.3f} px (estimated), J/2N {result.normalised_cost:.3f}, "
-          f"rms {result.rms_px:.3f} px, {result.num_segments} segments")
-    for w in result.warnings:
-        print(f"  warning: {w}")
-    print(f"  took {time.perf_counter() - started:.1f} s")
-    return EXIT_OK
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="rscalib", description="Camera calibration from video: rolling-shutter line delay "
                      "and self-calibration.")
     parser.add_argument("--version", action="version", version=f"rscalib {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    demo = sub.add_parser("demo", help="run the built-in demonstration (no arguments needed)",
-                          description="Run the built-in demonstration on synthetic data.")
-    demo.add_argument("--line-delay-us", type=float, default=30.0, help="true line delay in us/row (30)")
-    demo.add_argument("--duration", type=float, default=10.0, help="seconds of video (10)")
-    demo.add_argument("--noise", type=float, default=0.3, help="detection noise in px (0.3)")
-    demo.add_argument("--seed", type=int, default=0, help="random seed of the motion and noise (0)")
-    demo.set_defaults(func=_cmd_demo)
+    for module in COMMAND_MODULES:
+        module.add_parser(sub)
     return parser
 
 
@@ -80,7 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
-        parser.print_help()
+        parser.print_help(sys.stderr)
+        print("rscalib: error: a COMMAND is required", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
         return int(args.func(args))
