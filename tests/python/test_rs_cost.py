@@ -224,7 +224,8 @@ def test_error_noise_map_exact_form():
         a = np.asarray(_core.error_noise_map(d, velocity))
         expected = np.array([[1.0, -d * velocity[0]], [0.0, 1.0 - d * velocity[1]]])
         np.testing.assert_allclose(a, expected, rtol=0, atol=1e-15)
-    np.testing.assert_array_equal(np.asarray(_core.error_noise_map(0.0, np.array([500.0, -700.0]))), np.eye(2))
+    identity = np.asarray(_core.error_noise_map(0.0, np.array([500.0, -700.0])))
+    np.testing.assert_array_equal(identity, np.eye(2))
 
 
 def test_standardisation_weight_whitens_a_r_a_transpose():
@@ -295,7 +296,7 @@ def project_at(trajectory, camera, point_w, times):
     return project_cv(camera, points_c)
 
 
-@pytest.mark.parametrize("omega, expect_sign", [((2.4, -1.1, 0.3), +1), ((-2.4, 1.3, -0.2), -1)],
+@pytest.mark.parametrize("omega, expect_sign", [((-4.0, 6.0, 0.3), +1), ((4.0, -6.5, -0.2), -1)],
                          ids=["point-moves-down", "point-moves-up"])
 def test_error_covariance_is_a_r_a_transpose(omega, expect_sign):
     camera = RADTAN
@@ -324,7 +325,7 @@ def test_error_covariance_is_a_r_a_transpose(omega, expect_sign):
     velocity = (ends[0] - ends[1]) / (2 * h)
     gain = d * velocity[1]
     assert expect_sign * gain >= 0.1, f"d * v_dot = {gain}: too slow to see the effect"
-    assert abs(d * velocity[0]) >= 0.03
+    assert abs(d * velocity[0]) >= 0.2  # large enough to tell where the off-diagonal term sits
 
     # Noisy measurements and their errors e = y - pi(T(t_i + v_meas d) P).
     rng = np.random.default_rng(123)
@@ -337,11 +338,14 @@ def test_error_covariance_is_a_r_a_transpose(omega, expect_sign):
     scale = np.sqrt(np.outer(np.diag(predicted), np.diag(predicted)))
     relative = np.abs(empirical - predicted) / scale
     assert relative.max() < 0.03, f"empirical\n{empirical}\npredicted A R A^T\n{predicted}"
-    assert np.abs(e.mean(axis=0)).max() < 4 * sigma / np.sqrt(samples) * 1.5
+    assert np.abs(e.mean(axis=0)).max() < 6 * sigma / np.sqrt(samples)  # unbiased to first order
 
-    # The test can fail: R itself is clearly rejected.
-    plain = sigma ** 2 * np.eye(2)
-    assert (np.abs(empirical - plain) / scale).max() > 0.15
+    # The test can fail: R itself, the opposite sign and the transposed coupling (u-noise moving
+    # v) are all clearly rejected.
+    du, dv = d * velocity
+    for wrong in (np.eye(2), np.array([[1.0, du], [0.0, 1.0 + dv]]), np.array([[1.0, 0.0], [-du, 1.0 - dv]])):
+        other = sigma ** 2 * wrong @ wrong.T
+        assert (np.abs(empirical - other) / scale).max() > 0.1, wrong
 
     # The standardisation weight whitens the Monte-Carlo errors.
     w, clamped = _core.standardisation_weight(d, velocity, sigma, 0.8)

@@ -3,5 +3,6 @@
 A module's parser sets `func(args) -> exit code`; rscalib.cli turns InputError into exit 2.
 """
 from . import demo
+from . import linedelay
 
-COMMAND_MODULES = [demo]
+COMMAND_MODULES = [demo, linedelay]
