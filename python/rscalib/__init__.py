@@ -15,6 +15,7 @@ from ._core import (
     unwrap_rotation_vectors,
 )
 from .errors import InputError
+from .linedelay import LineDelayResult, calibrate_line_delay, localize
 from .observations import Observations
 
 try:
@@ -26,7 +27,10 @@ __all__ = [
     "BSpline",
     "CameraModel",
     "InputError",
+    "LineDelayResult",
     "Observations",
+    "calibrate_line_delay",
+    "localize",
     "fit_bspline",
     "poses_at",
     "rotation_matrix_to_vector",
