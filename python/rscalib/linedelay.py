@@ -346,8 +346,10 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
                             f"motion): sigma_d = {std * 1e6 if math.isfinite(std) else float('inf'):.3g} us; "
                             "move the camera faster, mostly rotating about its x and y axes")
     if cost > 1.5:
+        hint = ("outliers are down-weighted by the robust loss" if robust_loss != "none"
+                else "or there are outliers (try robust_loss='huber')")
         warnings.append(f"normalised cost J/2N = {cost:.2f} > 1.5: the detection noise is larger than "
-                        f"sigma = {sigma:.3f} px, or there are outliers (try robust_loss='huber')")
+                        f"sigma = {sigma:.3f} px, {hint}")
     if summary.clamped_weights:
         warnings.append(f"{summary.clamped_weights} observations move down the image nearly as fast as the "
                         "shutter; their error weights were clamped")
