@@ -69,7 +69,7 @@ def _detect(args, camera):
     from ..targets import load_target
 
     target = load_target(args.target)
-    detection = detect_video(args.video, target, workers=args.workers, use_cache=not args.no_cache,
+    detection = detect_video(args.video, target, workers=args.workers, cache=not args.no_cache,
                              progress=not args.quiet)
     if detection.observations.num_observations == 0:
         raise InputError(f"the target was not detected in any of the {detection.frames_total} frames "
@@ -77,6 +77,8 @@ def _detect(args, camera):
     if tuple(detection.image_size) != (camera.width, camera.height):
         raise InputError(f"the video is {detection.image_size[0]}x{detection.image_size[1]} but the camera file is "
                          f"{camera.width}x{camera.height}")
+    for w in detection.warnings:
+        _say(args, f"warning: {w}")
     _say(args, f"detection: target in {detection.frames_detected} of {detection.frames_total} frames"
          + (" (cached)" if detection.from_cache else "")
          + ("; dropped: " + ", ".join(f"{k} {v}" for k, v in detection.dropped.items()) if detection.dropped else ""))
@@ -108,8 +110,10 @@ def run_linedelay(args) -> int:
     _say(args, "estimating trajectory and line delay:")
     result = calibrate_line_delay(detection.observations, camera, args.rows, pixel_sigma=args.pixel_sigma,
                                   robust_loss=args.robust, max_rounds=args.max_rounds, progress=_progress(args))
+    result.warnings[:0] = list(detection.warnings)
     extra = {"video": str(args.video), "detection_dropped": detection.dropped,
-             "frames_detected": detection.frames_detected}
+             "frames_detected": detection.frames_detected, "timestamps_from": detection.timestamps,
+             "detection_time_s": detection.detect_time_s}
     summary = write_outputs(result, camera, args.out, frames_total=detection.frames_total, extra=extra,
                             fps=_fps(detection.observations))
     std = result.line_delay_std_s
