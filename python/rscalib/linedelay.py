@@ -29,7 +29,6 @@ PAPER_MOTION_PRIOR_Q = (1e-5, 1e-5, 1e-5, 1e-2, 1e-2, 1e-2)
 # Rounds before the last are re-solved after knot insertion anyway: solve them loosely.
 _ROUND_MAX_ITERATIONS = 30
 _ROUND_FUNCTION_TOLERANCE = 1e-6
-_HOLD_LINE_DELAY_ABOVE_COST = 10.0 # J/2N above which d is held at d0 during knot adaptation
 # The line delay counts as determined when its standard deviation is below this fraction
 # of the nominal full-frame delay 1 / (fps * rows) (a readout-time error of 5 % of a frame).
 UNDETERMINED_STD_FRACTION = 0.05
@@ -285,13 +284,8 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     summary = None
     options.max_iterations = _ROUND_MAX_ITERATIONS
     options.function_tolerance = _ROUND_FUNCTION_TOLERANCE
-    # While the trajectory is far too stiff to explain the data (J/2N large) d would only
-    # absorb the misfit, and the solve wanders: hold d at its start value until then.
-    initial = _core.evaluate_line_delay(*args, trajectory, d, options)
-    hold_d = estimate and initial.measurement_cost > _HOLD_LINE_DELAY_ABOVE_COST * 2 * max(1, initial.num_error_terms)
     for round_index in range(max(1, max_rounds)):
         last_chance = round_index == max_rounds - 1
-        options.estimate_line_delay = estimate and not hold_d
         summary = _core.solve_line_delay(*args, trajectory, d, options)
         d = summary.line_delay_s
         cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
@@ -303,11 +297,6 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         history.append(record)
         if progress:
             progress(record)
-        if hold_d and (cost < _HOLD_LINE_DELAY_ABOVE_COST or not new_knots):
-            hold_d = False
-            if not new_knots:  # solve once more with d free on these knots
-                history[-1].segments_split = 0
-                continue
         if not new_knots:
             adapted = True
             break
@@ -323,7 +312,6 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     options.max_iterations = 100
     options.function_tolerance = 1e-9
     options.compute_covariance = estimate
-    options.estimate_line_delay = estimate
     summary = _core.solve_line_delay(*args, trajectory, d, options)
     d = summary.line_delay_s
     std = summary.line_delay_std_s if estimate else 0.0
