@@ -3,6 +3,8 @@
 A module's parser sets `func(args) -> exit code`; rscalib.cli turns InputError into exit 2.
 """
 from . import demo
+from . import intrinsics
 from . import linedelay
+from . import simulate
 
-COMMAND_MODULES = [demo, linedelay]
+COMMAND_MODULES = [demo, intrinsics, linedelay, simulate]

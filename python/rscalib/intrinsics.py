@@ -1,0 +1,278 @@
+"""Intrinsic calibration from target detections with OpenCV (SPEC §3).
+
+`calibrate_intrinsics` picks views (all of them for a few stills; for a video the sharpest,
+most varied `max_views`), runs cv2.calibrateCameraExtended (pinhole-radtan) or
+cv2.fisheye.calibrate (pinhole-equidistant), and reports the RMS, per-view errors and the
+standard deviations of the parameters. `write_intrinsics` writes camera.yaml (OpenCV
+FileStorage) and result.json.
+"""
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import cv2
+import numpy as np
+
+from ._core import CameraModel
+from .camera import camera_from_opencv, opencv_matrices
+from .camera_io import write_opencv_yaml
+from .detect import DETECTOR_VERSION, DetectionResult
+from .errors import InputError
+
+MODELS = ("pinhole-radtan", "pinhole-equidistant")
+PARAM_NAMES = {
+    "pinhole-radtan": ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"],
+    "pinhole-equidistant": ["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"],
+}
+MIN_VIEWS = 3
+MIN_POINTS_PER_VIEW = 6
+
+
+@dataclass
+class IntrinsicsResult:
+    """An intrinsic calibration. Per-view arrays have one entry per view used.
+
+    params / param_std: in the order of param_names (conventions.md layouts); std devs are
+    sigma * sqrt(diag((J^T J)^-1)) with sigma^2 = sum of squared errors / (2N - unknowns).
+    view_index: index of each view into the detections' observation frames.
+    """
+
+    camera: CameraModel
+    model: str
+    rms_px: float
+    param_names: list
+    params: np.ndarray
+    param_std: np.ndarray
+    view_index: np.ndarray
+    view_frames: np.ndarray
+    view_labels: list
+    view_rms_px: np.ndarray
+    view_points: np.ndarray
+    rvecs: np.ndarray
+    tvecs: np.ndarray
+    views_available: int
+    warnings: list = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (SI units; pixels for intrinsics)."""
+        k, dist = opencv_matrices(self.camera)
+        return {
+            "model": self.model,
+            "image_width": int(self.camera.width),
+            "image_height": int(self.camera.height),
+            "rms_px": float(self.rms_px),
+            "parameters": {n: float(v) for n, v in zip(self.param_names, self.params)},
+            "std": {n: float(v) for n, v in zip(self.param_names, self.param_std)},
+            "camera_matrix": k.tolist(),
+            "distortion_coefficients": dist.tolist(),
+            "views_used": int(len(self.view_index)),
+            "views_available": int(self.views_available),
+            "views": [{"frame": int(f), "label": str(lbl), "points": int(n), "rms_px": float(e)}
+                      for f, lbl, n, e in zip(self.view_frames, self.view_labels, self.view_points, self.view_rms_px)],
+            "warnings": list(self.warnings),
+        }
+
+
+def select_views(detections: DetectionResult, max_views: int) -> np.ndarray:
+    """Indices (into the observation frames) of up to max_views views: sharp, and spread over
+    image position, target size in the image and target tilt (farthest-point sampling)."""
+    obs = detections.observations
+    slices = obs.frame_slices()
+    usable = np.array([len(s) >= MIN_POINTS_PER_VIEW for s in slices], dtype=bool)
+    candidates = np.nonzero(usable)[0]
+    if len(candidates) <= max_views:
+        return candidates
+    blur = np.nan_to_num(detections.blur_px[candidates], nan=np.nanmax(detections.blur_px[candidates])
+                         if np.isfinite(detections.blur_px[candidates]).any() else 0.0)
+    if len(candidates) >= 2 * max_views:
+        # the sharpest half (or at least 2 * max_views) to choose from
+        keep = max(2 * max_views, len(candidates) // 2)
+        order = np.argsort(blur, kind="stable")[:keep]
+        candidates, blur = candidates[np.sort(order)], blur[np.sort(order)]
+    features = np.array([_view_features(obs, slices[i]) for i in candidates])
+    spread = features.std(axis=0)
+    features = features / np.where(spread > 1e-12, spread, 1.0)
+    chosen = [int(np.argmin(blur))]
+    distance = np.linalg.norm(features - features[chosen[0]], axis=1)
+    blur_scale = max(float(np.ptp(blur)), 1e-9)
+    while len(chosen) < max_views:
+        # far from every chosen view; among near-equals, the sharper (a small penalty)
+        score = distance - 0.1 * (blur - blur.min()) / blur_scale
+        score[chosen] = -np.inf
+        pick = int(np.argmax(score))
+        chosen.append(pick)
+        distance = np.minimum(distance, np.linalg.norm(features - features[pick], axis=1))
+    return np.sort(candidates[chosen])
+
+
+def _view_features(obs, rows: np.ndarray) -> np.ndarray:
+    """Centre (fractions of the image), size (sqrt of hull area fraction) and tilt (normal's
+    x, y from a planar PnP with a guessed focal length) of one view."""
+    width, height = obs.image_size
+    uv = obs.uv[rows]
+    xy = obs.target_points[obs.point_id[rows]]
+    centre = uv.mean(0) / [width, height]
+    hull = cv2.convexHull(uv.astype(np.float32))
+    size = np.sqrt(max(cv2.contourArea(hull), 0.0) / (width * height))
+    f_guess = 0.9 * max(width, height)
+    k = np.array([[f_guess, 0, width / 2], [0, f_guess, height / 2], [0, 0, 1.0]])
+    normal = np.zeros(2)
+    try:
+        ok, rvec, _ = cv2.solvePnP(xy.astype(np.float64), uv.astype(np.float64), k, None, flags=cv2.SOLVEPNP_IPPE)
+        if ok:
+            normal = cv2.Rodrigues(rvec)[0][:2, 2]
+    except cv2.error:
+        pass
+    return np.r_[centre, size, normal]
+
+
+def calibrate_intrinsics(detections: DetectionResult, model: str = "pinhole-radtan",
+                         max_views: int = 40) -> IntrinsicsResult:
+    """Calibrate from detections (see detect.detect_video). InputError when there are too few views."""
+    if model not in MODELS:
+        raise InputError(f"unknown model {model!r} (one of {', '.join(MODELS)})")
+    if max_views < MIN_VIEWS:
+        raise InputError(f"--max-views must be at least {MIN_VIEWS}")
+    obs = detections.observations
+    if obs.num_frames == 0:
+        raise InputError(f"the target was not found in any of {detections.frames_total} frames "
+                         f"({_dropped_text(detections.dropped)}); check the target file (e.g. its size)")
+    views = select_views(detections, max_views)
+    if len(views) < MIN_VIEWS:
+        raise InputError(f"only {len(views)} view(s) with at least {MIN_POINTS_PER_VIEW} target points; "
+                         f"need {MIN_VIEWS} or more")
+    slices = obs.frame_slices()
+    object_points = [obs.target_points[obs.point_id[slices[v]]].astype(np.float64) for v in views]
+    image_points = [obs.uv[slices[v]].astype(np.float64) for v in views]
+    size = obs.image_size
+    warnings = []
+    if model == "pinhole-radtan":
+        k, dist, rvecs, tvecs, std = _calibrate_radtan(object_points, image_points, size)
+        params = np.r_[k[0, 0], k[1, 1], k[0, 2], k[1, 2], dist[:5]]
+    else:
+        k, dist, rvecs, tvecs, std = _calibrate_fisheye(object_points, image_points, size)
+        params = np.r_[k[0, 0], k[1, 1], k[0, 2], k[1, 2], dist[:4]]
+    camera = camera_from_opencv(k, dist, size[0], size[1], model)
+    errors = [_reprojection_errors(model, o, i, r, t, k, dist)
+              for o, i, r, t in zip(object_points, image_points, rvecs, tvecs)]
+    squared = np.concatenate([e ** 2 for e in errors])
+    rms = float(np.sqrt(squared.mean()))
+    view_rms = np.array([np.sqrt(np.mean(e ** 2)) for e in errors])
+    if len(views) < 10:
+        warnings.append(f"only {len(views)} views: the distortion terms are weakly determined")
+    if rms > 1.0:
+        warnings.append(f"RMS {rms:.2f} px is high: check the target dimensions and the views with large errors")
+    return IntrinsicsResult(
+        camera=camera, model=model, rms_px=rms, param_names=list(PARAM_NAMES[model]), params=params,
+        param_std=np.asarray(std, dtype=np.float64), view_index=views,
+        view_frames=detections.frame_numbers[views], view_labels=[detections.frame_labels[v] for v in views],
+        view_rms_px=view_rms, view_points=np.array([len(i) for i in image_points]),
+        rvecs=np.array([np.ravel(r) for r in rvecs]), tvecs=np.array([np.ravel(t) for t in tvecs]),
+        views_available=obs.num_frames, warnings=warnings)
+
+
+def _calibrate_radtan(object_points, image_points, size):
+    obj = [o.astype(np.float32).reshape(-1, 1, 3) for o in object_points]
+    img = [i.astype(np.float32).reshape(-1, 1, 2) for i in image_points]
+    criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+    try:
+        _, k, dist, rvecs, tvecs, std_intrinsics, _, _ = cv2.calibrateCameraExtended(
+            obj, img, tuple(size), None, None, flags=0, criteria=criteria)
+    except cv2.error as error:
+        raise InputError(f"calibration failed ({_cv_message(error)})") from None
+    # OpenCV's order: fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, ...
+    return k, dist.ravel()[:5], rvecs, tvecs, std_intrinsics.ravel()[:9]
+
+
+def _calibrate_fisheye(object_points, image_points, size):
+    obj = [o.reshape(-1, 1, 3).astype(np.float64) for o in object_points]
+    img = [i.reshape(-1, 1, 2).astype(np.float64) for i in image_points]
+    flags = cv2.fisheye.CALIB_RECOMPUTE_EXTRINSIC | cv2.fisheye.CALIB_FIX_SKEW
+    criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    try:
+        _, k, dist, rvecs, tvecs = cv2.fisheye.calibrate(obj, img, tuple(size), None, None, flags=flags,
+                                                         criteria=criteria)
+    except cv2.error as error:
+        raise InputError(f"fisheye calibration failed ({_cv_message(error)}); try more, less tilted views") from None
+    dist = dist.ravel()[:4]
+    std = _fisheye_std(obj, img, k, dist, rvecs, tvecs)
+    return k, dist, rvecs, tvecs, std
+
+
+def _fisheye_std(obj, img, k, dist, rvecs, tvecs) -> np.ndarray:
+    """Std devs of fx, fy, cx, cy, k1..k4 from the full Jacobian (cv2.fisheye.projectPoints
+    returns d(uv)/d[fx fy cx cy k1..k4 rvec tvec alpha])."""
+    views = len(obj)
+    blocks, residuals = [], []
+    for v in range(views):
+        projected, jacobian = cv2.fisheye.projectPoints(obj[v], rvecs[v], tvecs[v], k, dist)
+        residuals.append((img[v] - projected).ravel())
+        rows = np.zeros((jacobian.shape[0], 8 + 6 * views))
+        rows[:, :8] = jacobian[:, :8]
+        rows[:, 8 + 6 * v: 14 + 6 * v] = jacobian[:, 8:14]
+        blocks.append(rows)
+    jac = np.vstack(blocks)
+    res = np.concatenate(residuals)
+    dof = max(1, len(res) - jac.shape[1])
+    sigma2 = float(res @ res) / dof
+    try:
+        covariance = np.linalg.inv(jac.T @ jac) * sigma2
+    except np.linalg.LinAlgError:
+        return np.full(8, np.nan)
+    return np.sqrt(np.maximum(np.diag(covariance)[:8], 0.0))
+
+
+def _reprojection_errors(model, obj, img, rvec, tvec, k, dist) -> np.ndarray:
+    if model == "pinhole-radtan":
+        projected, _ = cv2.projectPoints(obj.reshape(-1, 1, 3), rvec, tvec, k, dist)
+    else:
+        projected, _ = cv2.fisheye.projectPoints(obj.reshape(-1, 1, 3), rvec, tvec, k, dist)
+    return np.linalg.norm(projected.reshape(-1, 2) - img.reshape(-1, 2), axis=1)
+
+
+def _cv_message(error: cv2.error) -> str:
+    text = str(error)
+    match = re.search(r"error: \(-?\d+:[^)]*\) (.*?)(?: in function|$)", text, re.S)
+    return (match.group(1) if match else text).strip().splitlines()[0][:200]
+
+
+def _dropped_text(dropped: dict) -> str:
+    if not dropped:
+        return "none dropped"
+    return ", ".join(f"{count} {reason.replace('_', ' ')}" for reason, count in sorted(dropped.items()))
+
+
+def write_intrinsics(result: IntrinsicsResult, out_dir, detections: Optional[DetectionResult] = None,
+                     extra: Optional[dict] = None) -> tuple[Path, Path]:
+    """Write out_dir/camera.yaml (OpenCV FileStorage, camera_io.write_opencv_yaml) and
+    out_dir/result.json. Returns both paths."""
+    from . import __version__
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out} exists and is not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputError(f"cannot create {out}: {error.strerror}") from None
+    camera_path, json_path = out / "camera.yaml", out / "result.json"
+    write_opencv_yaml(result.camera, camera_path, extra={"avg_reprojection_error": float(result.rms_px)})
+    summary = {"rscalib_version": __version__, "detector_version": DETECTOR_VERSION, **result.to_dict()}
+    if detections is not None:
+        times = detections.observations.frame_times_s
+        for view, index in zip(summary["views"], result.view_index):
+            view["time_s"] = float(times[index])
+        summary.update({
+            "frames_total": int(detections.frames_total),
+            "frames_detected": int(detections.frames_detected),
+            "dropped": {k: int(v) for k, v in detections.dropped.items()},
+            "timestamps": detections.timestamps,
+            "detections_from_cache": bool(detections.from_cache),
+        })
+        summary["warnings"] = list(detections.warnings) + summary["warnings"]
+    summary.update(extra or {})
+    json_path.write_text(json.dumps(summary, indent=2))
+    return camera_path, json_path
