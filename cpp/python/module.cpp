@@ -25,4 +25,5 @@ PYBIND11_MODULE(_core, m) {
   rscalib::python::BindSpline(m);
   rscalib::python::BindCamera(m);
   rscalib::python::BindRs(m);
+  rscalib::python::BindSog(m);
 }

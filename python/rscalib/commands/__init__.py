@@ -5,6 +5,7 @@ A module's parser sets `func(args) -> exit code`; rscalib.cli turns InputError i
 from . import demo
 from . import intrinsics
 from . import linedelay
+from . import selfcalib
 from . import simulate
 
-COMMAND_MODULES = [demo, intrinsics, linedelay, simulate]
+COMMAND_MODULES = [demo, intrinsics, linedelay, selfcalib, simulate]

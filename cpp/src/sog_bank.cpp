@@ -1,0 +1,691 @@
+// The SOG self-calibration filter: one EKF (SelfCalibrationEkf) and the bank of them (SogBank).
+// docs/sog.md has the maths; comments here say why the code is shaped as it is.
+#include "rscalib/sog/sog_bank.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <thread>
+
+#include <Eigen/Dense>
+
+#include "rscalib/core/error.hpp"
+#include "rscalib/sog/inverse_depth.hpp"
+#include "rscalib/sog/mixture.hpp"
+#include "rscalib/sog/sprt.hpp"
+
+namespace rscalib::sog {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// Copies the lower triangle onto the upper one (after triangular-only updates).
+void MirrorLower(Eigen::MatrixXd* p) {
+  const Eigen::Index n = p->rows();
+  for (Eigen::Index j = 1; j < n; ++j)
+    for (Eigen::Index i = 0; i < j; ++i) (*p)(i, j) = (*p)(j, i);
+}
+
+// Runs fn(i) for i in [0, count) on up to num_threads threads (the calling one included).
+template <typename Fn>
+void ParallelFor(int count, int num_threads, Fn&& fn) {
+  const int threads = std::max(1, std::min(num_threads, count));
+  if (threads == 1) {
+    for (int i = 0; i < count; ++i) fn(i);
+    return;
+  }
+  std::atomic<int> next{0};
+  const auto worker = [&]() {
+    for (int i = next++; i < count; i = next++) fn(i);
+  };
+  std::vector<std::thread> pool;
+  for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+  worker();
+  for (std::thread& thread : pool) thread.join();
+}
+
+}  // namespace
+
+// =================================================================================== EKF
+
+SelfCalibrationEkf::SelfCalibrationEkf(const Vector5d& calibration,
+                                       const Matrix5d& calibration_covariance,
+                                       const MotionState& motion, const Matrix13d& motion_covariance)
+    : x_(kCameraDim), p_(Eigen::MatrixXd::Zero(kCameraDim, kCameraDim)) {
+  x_.head<5>() = calibration;
+  x_.segment<13>(kPosition) = motion;
+  p_.topLeftCorner<5, 5>() = calibration_covariance;
+  p_.block<13, 13>(kPosition, kPosition) = motion_covariance;
+}
+
+void SelfCalibrationEkf::SetMotionState(const MotionState& motion, const Matrix13d& covariance) {
+  x_.segment<13>(kPosition) = motion;
+  p_.middleRows<13>(kPosition).setZero();
+  p_.middleCols<13>(kPosition).setZero();
+  p_.block<13, 13>(kPosition, kPosition) = covariance;
+}
+
+void SelfCalibrationEkf::Predict(double dt_s, const ProcessNoise& noise) {
+  const MotionState motion = x_.segment<13>(kPosition);
+  MotionJacobian f;
+  x_.segment<13>(kPosition) = PredictMotion(motion, dt_s, &f, nullptr);
+  // Only the 13 motion rows/columns change: P <- F P F^T in O(13^2 n), not O(n^3).
+  const Eigen::Matrix<double, 13, Eigen::Dynamic> rows = f * p_.middleRows<13>(kPosition);
+  p_.middleRows<13>(kPosition) = rows;
+  const Eigen::Matrix<double, Eigen::Dynamic, 13> cols = p_.middleCols<13>(kPosition) * f.transpose();
+  p_.middleCols<13>(kPosition) = cols;
+  p_.block<13, 13>(kPosition, kPosition) +=
+      MotionProcessNoise(motion, dt_s, noise.accel_sigma, noise.angular_accel_sigma);
+  for (int i = 0; i < kCalibrationDim; ++i) {
+    const double s = noise.calibration_random_walk[i];
+    p_(i, i) += s * s * dt_s;
+  }
+}
+
+namespace {
+
+template <int D>
+Eigen::Matrix2d InnovationCovariance(const Eigen::MatrixXd& p, int offset,
+                                     const Eigen::Matrix<double, 2, 12>& h_camera,
+                                     const Eigen::Matrix<double, 2, D>& h_feature, double variance) {
+  const Eigen::Matrix<double, 2, 12> a =
+      h_camera * p.topLeftCorner<12, 12>() + h_feature * p.block<D, 12>(offset, 0);
+  const Eigen::Matrix<double, 2, D> b =
+      h_camera * p.block<12, D>(0, offset) + h_feature * p.block<D, D>(offset, offset);
+  Eigen::Matrix2d s = a * h_camera.transpose() + b * h_feature.transpose();
+  s = 0.5 * (s + s.transpose()).eval();
+  s.diagonal().array() += variance;
+  return s;
+}
+
+}  // namespace
+
+void SelfCalibrationEkf::PredictMeasurements(const FeatureMap& map, const std::vector<int>& indices,
+                                             const Eigen::Vector2d& pixel_size_mm, double pixel_sigma,
+                                             std::vector<FeaturePrediction>* predictions) const {
+  const MeasuredCamera camera = measured_camera();
+  const double variance = pixel_sigma * pixel_sigma;
+  for (int index : indices) {
+    const MapFeature& feature = map[index];
+    FeaturePrediction& out = (*predictions)[index];
+    out.valid = ProjectFeatureWithJacobians(camera, pixel_size_mm, feature.kind,
+                                            x_.data() + feature.offset, &out.uv,
+                                            &out.d_uv_d_camera, &out.d_uv_d_feature);
+    if (!out.valid) continue;
+    if (feature.kind == FeatureKind::kInverseDepth)
+      out.innovation_covariance = InnovationCovariance<6>(p_, feature.offset, out.d_uv_d_camera,
+                                                          out.d_uv_d_feature, variance);
+    else
+      out.innovation_covariance = InnovationCovariance<3>(
+          p_, feature.offset, out.d_uv_d_camera, out.d_uv_d_feature.leftCols<3>(), variance);
+    out.valid = out.innovation_covariance.allFinite();
+  }
+}
+
+namespace {
+
+// Projections and Jacobians of map features at state x (no covariance); false if any fails.
+bool Linearise(const Eigen::VectorXd& x, const FeatureMap& map, const std::vector<int>& indices,
+               const Eigen::Vector2d& pixel_size_mm, std::vector<FeaturePrediction>* out) {
+  const MeasuredCamera camera = x.head<kMeasuredCameraDim>();
+  for (size_t j = 0; j < indices.size(); ++j) {
+    const MapFeature& f = map[indices[j]];
+    FeaturePrediction& p = (*out)[j];
+    p.valid = ProjectFeatureWithJacobians(camera, pixel_size_mm, f.kind, x.data() + f.offset, &p.uv,
+                                          &p.d_uv_d_camera, &p.d_uv_d_feature);
+    if (!p.valid) return false;
+  }
+  return true;
+}
+
+// P H^T (n x m) and S = H P H^T + sigma^2 I for the sparse H of `predictions`: each pair of
+// rows touches the 12 calibration+pose columns and one feature's columns.
+void SparseInnovation(const Eigen::MatrixXd& p, const FeatureMap& map, const std::vector<int>& indices,
+                      const std::vector<FeaturePrediction>& predictions, double pixel_sigma,
+                      Eigen::MatrixXd* pht, Eigen::MatrixXd* s) {
+  const int k = static_cast<int>(indices.size());
+  pht->resize(p.rows(), 2 * k);
+  s->resize(2 * k, 2 * k);
+  for (int j = 0; j < k; ++j) {
+    const MapFeature& f = map[indices[j]];
+    const FeaturePrediction& pr = predictions[j];
+    const int d = FeatureDim(f.kind);
+    pht->middleCols<2>(2 * j).noalias() = p.leftCols<12>() * pr.d_uv_d_camera.transpose();
+    pht->middleCols<2>(2 * j).noalias() += p.middleCols(f.offset, d) * pr.d_uv_d_feature.leftCols(d).transpose();
+  }
+  for (int i = 0; i < k; ++i) {
+    const MapFeature& f = map[indices[i]];
+    const FeaturePrediction& pr = predictions[i];
+    const int d = FeatureDim(f.kind);
+    s->middleRows<2>(2 * i).noalias() = pr.d_uv_d_camera * pht->topRows<12>();
+    s->middleRows<2>(2 * i).noalias() += pr.d_uv_d_feature.leftCols(d) * pht->middleRows(f.offset, d);
+  }
+  *s = 0.5 * (*s + s->transpose()).eval();
+  s->diagonal().array() += pixel_sigma * pixel_sigma;
+}
+
+}  // namespace
+
+bool SelfCalibrationEkf::Update(const FeatureMap& map, const std::vector<int>& indices,
+                                const std::vector<FeaturePrediction>& predictions,
+                                const std::vector<Eigen::Vector2d>& z, const UpdateSettings& settings,
+                                double* log_likelihood, double* nis) {
+  const int k = static_cast<int>(indices.size());
+  const int m = 2 * k;
+  *log_likelihood = 0.0;
+  if (nis != nullptr) *nis = 0.0;
+  if (k == 0) return true;
+  Eigen::MatrixXd pht, s;
+  SparseInnovation(p_, map, indices, predictions, settings.pixel_sigma, &pht, &s);
+  Eigen::LLT<Eigen::MatrixXd> llt(s);
+  if (llt.info() != Eigen::Success) return false;
+  Eigen::VectorXd residual(m);  // z - h(x_i) - H_i (x_prior - x_i); the innovation at i = 0
+  for (int j = 0; j < k; ++j) residual.segment<2>(2 * j) = z[j] - predictions[j].uv;
+  // The weight of this filter uses the prior predictive density of the innovation.
+  const Eigen::VectorXd white0 = llt.matrixL().solve(residual);
+  const double log_det = 2.0 * llt.matrixLLT().diagonal().array().log().sum();
+  *log_likelihood = -0.5 * (white0.squaredNorm() + log_det + m * std::log(2.0 * M_PI));
+  if (nis != nullptr) *nis = white0.squaredNorm();
+  if (!std::isfinite(*log_likelihood)) return false;
+
+  // Iterated EKF (Gauss-Newton on the MAP cost): relinearise h at the updated mean; each
+  // iteration costs O(n m^2), only the final covariance update is O(n^2 m).
+  const Eigen::VectorXd x_prior = x_;
+  Eigen::VectorXd x_i = x_prior;
+  std::vector<FeaturePrediction> lin = predictions;
+  for (int it = 1; it < settings.iterations; ++it) {
+    const Eigen::VectorXd x_next = x_prior + pht * llt.solve(residual);
+    const double step = (x_next - x_i).norm();
+    std::vector<FeaturePrediction> next = lin;
+    if (!x_next.allFinite() || !Linearise(x_next, map, indices, settings.pixel_size_mm, &next)) break;
+    Eigen::MatrixXd pht_next, s_next;
+    SparseInnovation(p_, map, indices, next, settings.pixel_sigma, &pht_next, &s_next);
+    Eigen::LLT<Eigen::MatrixXd> llt_next(s_next);
+    if (llt_next.info() != Eigen::Success) break;
+    x_i = x_next;
+    lin.swap(next);
+    pht.swap(pht_next);
+    llt = llt_next;
+    const Eigen::VectorXd dx = x_prior - x_i;
+    for (int j = 0; j < k; ++j) {
+      const MapFeature& f = map[indices[j]];
+      const int d = FeatureDim(f.kind);
+      residual.segment<2>(2 * j) = z[j] - lin[j].uv - lin[j].d_uv_d_camera * dx.head<12>() -
+                                   lin[j].d_uv_d_feature.leftCols(d) * dx.segment(f.offset, d);
+    }
+    if (step <= 1e-9 * (1.0 + x_i.norm())) break;
+  }
+  // With W = P H^T L^-T: x = x_prior + W L^-1 r, P -= W W^T (= K S K^T). Only the lower
+  // triangle of the O(n^2 m) product is formed, then mirrored.
+  const Eigen::MatrixXd w_t = llt.matrixL().solve(pht.transpose());  // m x n
+  x_ = x_prior;
+  x_.noalias() += w_t.transpose() * llt.matrixL().solve(residual);
+  p_.selfadjointView<Eigen::Lower>().rankUpdate(w_t.transpose(), -1.0);
+  MirrorLower(&p_);
+  NormaliseQuaternion();
+  return true;
+}
+
+void SelfCalibrationEkf::NormaliseQuaternion() {
+  const Eigen::Vector4d q = x_.segment<4>(kQuaternion);
+  const double norm = q.norm();
+  const Eigen::Vector4d unit = q / norm;
+  const Eigen::Matrix4d j = (Eigen::Matrix4d::Identity() - unit * unit.transpose()) / norm;
+  x_.segment<4>(kQuaternion) = unit;
+  const Eigen::Matrix<double, 4, Eigen::Dynamic> rows = j * p_.middleRows<4>(kQuaternion);
+  p_.middleRows<4>(kQuaternion) = rows;
+  const Eigen::Matrix<double, Eigen::Dynamic, 4> cols = p_.middleCols<4>(kQuaternion) * j.transpose();
+  p_.middleCols<4>(kQuaternion) = cols;
+}
+
+bool SelfCalibrationEkf::AddInverseDepthFeatures(const std::vector<Eigen::Vector2d>& uv,
+                                                 const Eigen::Vector2d& pixel_size_mm, double rho0,
+                                                 double rho_sigma, double pixel_sigma) {
+  const int count = static_cast<int>(uv.size());
+  if (count == 0) return true;
+  const int n = dim();
+  const int added = kInverseDepthDim * count;
+  const MeasuredCamera camera = measured_camera();
+  Eigen::Matrix<double, Eigen::Dynamic, 12> j_camera(added, 12);
+  Eigen::VectorXd y(added);
+  Eigen::MatrixXd noise = Eigen::MatrixXd::Zero(added, added);
+  for (int i = 0; i < count; ++i) {
+    Eigen::Matrix<double, 6, 12> jc;
+    Eigen::Matrix<double, 6, 2> juv;
+    y.segment<6>(6 * i) = InitialiseInverseDepth(camera, pixel_size_mm, uv[i], rho0, &jc, &juv);
+    j_camera.middleRows<6>(6 * i) = jc;
+    noise.block<6, 6>(6 * i, 6 * i) = pixel_sigma * pixel_sigma * juv * juv.transpose();
+    noise(6 * i + 5, 6 * i + 5) += rho_sigma * rho_sigma;
+  }
+  if (!y.allFinite() || !j_camera.allFinite()) return false;
+  // A new point depends on the calibration and pose only: its rows are J P[0:12, :].
+  const Eigen::MatrixXd rows = j_camera * p_.topRows<12>();
+  x_.conservativeResize(n + added);
+  x_.tail(added) = y;
+  p_.conservativeResize(n + added, n + added);
+  p_.bottomLeftCorner(added, n) = rows;
+  p_.topRightCorner(n, added) = rows.transpose();
+  p_.bottomRightCorner(added, added) = rows.leftCols<12>() * j_camera.transpose() + noise;
+  return true;
+}
+
+void SelfCalibrationEkf::Restructure(const StateRestructure& plan) {
+  for (int offset : plan.converted_offsets) {
+    Eigen::Matrix<double, 3, 6> j;
+    const Eigen::Vector3d xyz = InverseDepthToXyz(x_.segment<6>(offset), &j);
+    // P <- T P T^T with T acting on this feature's 6 rows; rows offset+3..5 become junk and
+    // are dropped by the compaction below.
+    const Eigen::Matrix<double, 3, Eigen::Dynamic> rows = j * p_.middleRows<6>(offset);
+    p_.middleRows<3>(offset) = rows;
+    const Eigen::Matrix<double, Eigen::Dynamic, 3> cols = p_.middleCols<6>(offset) * j.transpose();
+    p_.middleCols<3>(offset) = cols;
+    x_.segment<3>(offset) = xyz;
+  }
+  if (plan.trivial) return;
+  const Eigen::VectorXd x = x_(plan.keep);
+  const Eigen::MatrixXd p = p_(plan.keep, plan.keep);
+  x_ = x;
+  p_ = p;
+}
+
+// ================================================================================== bank
+
+SogBank::SogBank(const SogOptions& options, const std::vector<Vector5d>& means,
+                 const std::vector<Matrix5d>& covariances, const std::vector<double>& weights,
+                 int width, int height, const Eigen::Vector2d& pixel_size_mm)
+    : options_(options), width_(width), height_(height), pixel_size_mm_(pixel_size_mm) {
+  const size_t count = means.size();
+  if (count == 0) throw InputError("SogBank: at least one Gaussian is needed");
+  if (covariances.size() != count || weights.size() != count)
+    throw InputError("SogBank: means, covariances and weights must have the same length");
+  if (width <= 0 || height <= 0) throw InputError("SogBank: image size must be positive");
+  if (!(pixel_size_mm[0] > 0.0 && pixel_size_mm[1] > 0.0))
+    throw InputError("SogBank: pixel_size_mm must be positive");
+  if (!(options.pixel_sigma > 0.0)) throw InputError("SogBank: pixel_sigma must be > 0");
+  if (!(options.likelihood_temperature >= 1.0))
+    throw InputError("SogBank: likelihood_temperature must be >= 1");
+  if (!(options.sprt_alpha > 0.0 && options.sprt_alpha < 1.0 && options.sprt_beta > 0.0 &&
+        options.sprt_beta < 1.0))
+    throw InputError("SogBank: sprt_alpha and sprt_beta must be in (0, 1)");
+  MotionState motion = MotionState::Zero();
+  motion[3] = 1.0;  // q = identity: the world frame is the first camera frame
+  Matrix13d motion_cov = Matrix13d::Zero();
+  motion_cov.block<3, 3>(7, 7).diagonal().setConstant(std::pow(options.initial_velocity_sigma, 2));
+  motion_cov.block<3, 3>(10, 10).diagonal().setConstant(
+      std::pow(options.initial_angular_velocity_sigma, 2));
+  log_weights_.resize(static_cast<Eigen::Index>(count));
+  for (size_t i = 0; i < count; ++i) {
+    if (!means[i].allFinite() || !(means[i][0] > 0.0))
+      throw InputError("SogBank: every mean needs a finite f > 0");
+    const Matrix5d sym = 0.5 * (covariances[i] + covariances[i].transpose());
+    if (!sym.allFinite() || Eigen::LLT<Matrix5d>(sym).info() != Eigen::Success)
+      throw InputError("SogBank: covariance " + std::to_string(i) + " is not positive definite");
+    if (!(weights[i] > 0.0) || !std::isfinite(weights[i]))
+      throw InputError("SogBank: weights must be positive and finite");
+    filters_.emplace_back(means[i], sym, motion, motion_cov);
+    gaussian_ids_.push_back(static_cast<int>(i));
+    initial_f_sigma_.push_back(std::sqrt(sym(0, 0)));
+    log_weights_[static_cast<Eigen::Index>(i)] = std::log(weights[i]);
+  }
+  log_weights_.array() -= LogSumExp(log_weights_);
+  sprt_statistic_ = Eigen::VectorXd::Zero(log_weights_.size());
+  sprt_accepted_.assign(count, false);
+  predictions_.resize(count);
+}
+
+template <typename Fn>
+void SogBank::ForEachFilter(Fn&& fn) const {
+  ParallelFor(num_gaussians(), options_.num_threads, fn);
+}
+
+const SelfCalibrationEkf& SogBank::filter(int index) const {
+  if (index < 0 || index >= num_gaussians()) throw InputError("SogBank: filter index out of range");
+  return filters_[index];
+}
+
+Eigen::VectorXd SogBank::weights() const { return log_weights_.array().exp(); }
+
+int SogBank::leading_gaussian() const {
+  Eigen::Index best = 0;
+  log_weights_.maxCoeff(&best);
+  return static_cast<int>(best);
+}
+
+void SogBank::SetCameraState(const MotionState& state, const Matrix13d& covariance) {
+  if (!state.allFinite() || !covariance.allFinite())
+    throw InputError("SogBank: camera state must be finite");
+  for (SelfCalibrationEkf& f : filters_) f.SetMotionState(state, 0.5 * (covariance + covariance.transpose()));
+  predicted_.assign(map_.size(), false);
+}
+
+void SogBank::Predict(double dt_s) {
+  if (!(dt_s >= 0.0) || !std::isfinite(dt_s)) throw InputError("SogBank: dt_s must be >= 0");
+  const Eigen::Vector3d w = filters_[leading_gaussian()].mean().segment<3>(kAngularVelocity);
+  accumulated_rotation_rad_ += w.norm() * dt_s;
+  ForEachFilter([&](int i) { filters_[i].Predict(dt_s, options_.process); });
+  predicted_.assign(map_.size(), false);
+}
+
+void SogBank::EnsurePredictions(const std::vector<int>& indices) {
+  predicted_.resize(map_.size(), false);
+  std::vector<int> missing;
+  for (int index : indices)
+    if (!predicted_[index]) missing.push_back(index);
+  if (missing.empty()) return;
+  ForEachFilter([&](int i) {
+    predictions_[i].resize(map_.size());
+    filters_[i].PredictMeasurements(map_, missing, pixel_size_mm_, options_.pixel_sigma,
+                                    &predictions_[i]);
+  });
+  for (int index : missing) predicted_[index] = true;
+}
+
+bool SogBank::MergePrediction(int index, Eigen::Vector2d* uv, Eigen::Matrix2d* covariance) const {
+  std::vector<double> w;
+  std::vector<Eigen::Vector2d> means;
+  std::vector<Eigen::Matrix2d> covs;
+  double total = 0.0;
+  for (int i = 0; i < num_gaussians(); ++i) {
+    const FeaturePrediction& p = predictions_[i][index];
+    if (!p.valid) continue;
+    const double wi = std::exp(log_weights_[i]);
+    total += wi;
+    w.push_back(wi);
+    means.push_back(p.uv);
+    covs.push_back(p.innovation_covariance);
+  }
+  if (!(total >= options_.visibility_min_weight) || w.empty()) return false;
+  MergeGaussians<2>(w, means, covs, uv, covariance);
+  return uv->allFinite() && covariance->allFinite();
+}
+
+MergedPredictions SogBank::PredictMeasurements() {
+  std::vector<int> all(map_.size());
+  for (int k = 0; k < map_.size(); ++k) all[k] = k;
+  EnsurePredictions(all);
+  MergedPredictions out;
+  for (int k = 0; k < map_.size(); ++k) {
+    Eigen::Vector2d uv;
+    Eigen::Matrix2d cov;
+    if (!MergePrediction(k, &uv, &cov)) continue;
+    // Inside the image: pixel (u, v) covers [u - 1/2, u + 1/2] (docs/conventions.md).
+    if (uv[0] < -0.5 || uv[1] < -0.5 || uv[0] > width_ - 0.5 || uv[1] > height_ - 0.5) continue;
+    out.ids.push_back(map_[k].id);
+    out.uv.push_back(uv);
+    out.covariance.push_back(cov);
+  }
+  return out;
+}
+
+SogUpdateReport SogBank::Update(const std::vector<int64_t>& ids,
+                                const std::vector<Eigen::Vector2d>& uv,
+                                const std::vector<bool>& matched) {
+  const size_t rows = ids.size();
+  if (uv.size() != rows || matched.size() != rows)
+    throw InputError("SogBank.update: ids, uv and matched must have the same length");
+  std::vector<int> indices(rows);
+  for (size_t r = 0; r < rows; ++r) {
+    indices[r] = map_.IndexOf(ids[r]);
+    if (indices[r] < 0) throw InputError("SogBank.update: unknown feature id " + std::to_string(ids[r]));
+    for (size_t s = 0; s < r; ++s)
+      if (indices[s] == indices[r]) throw InputError("SogBank.update: repeated feature id");
+  }
+  EnsurePredictions(indices);
+  ++frame_;
+
+  SogUpdateReport report;
+  report.used.assign(rows, false);
+  report.gate_chi2.assign(rows, std::numeric_limits<double>::quiet_NaN());
+  std::vector<int> used_rows;
+  for (size_t r = 0; r < rows; ++r) {
+    map_[indices[r]].times_predicted += 1;
+    if (!matched[r] || !uv[r].allFinite()) continue;
+    Eigen::Vector2d mean;
+    Eigen::Matrix2d cov;
+    if (!MergePrediction(indices[r], &mean, &cov)) continue;
+    const Eigen::Vector2d d = uv[r] - mean;
+    report.gate_chi2[r] = d.dot(cov.ldlt().solve(d));
+    if (options_.gate_chi2 > 0.0 && !(report.gate_chi2[r] <= options_.gate_chi2)) continue;
+    report.used[r] = true;
+    map_[indices[r]].times_matched += 1;
+    used_rows.push_back(static_cast<int>(r));
+  }
+  report.num_used = static_cast<int>(used_rows.size());
+
+  // Every filter is updated with the same measurements (its own H, S, gain). A filter that
+  // cannot predict one of them is charged a fixed log-likelihood for it instead.
+  const int n_filters = num_gaussians();
+  Eigen::VectorXd log_lik = Eigen::VectorXd::Zero(n_filters);
+  Eigen::VectorXd nis = Eigen::VectorXd::Zero(n_filters);
+  const UpdateSettings settings{options_.pixel_sigma, options_.update_iterations, pixel_size_mm_};
+  ForEachFilter([&](int i) {
+    std::vector<int> idx;
+    std::vector<FeaturePrediction> preds;
+    std::vector<Eigen::Vector2d> z;
+    int unpredicted = 0;
+    for (int r : used_rows) {
+      const FeaturePrediction& p = predictions_[i][indices[r]];
+      if (!p.valid) {
+        ++unpredicted;
+        continue;
+      }
+      idx.push_back(indices[r]);
+      preds.push_back(p);
+      z.push_back(uv[r]);
+    }
+    double ll = 0.0;
+    if (!filters_[i].Update(map_, idx, preds, z, settings, &ll, &nis[i]) ||
+        !filters_[i].IsFinite() || !(filters_[i].mean()[0] > 0.0))
+      ll = -kInf;  // a diverged filter: drop it
+    log_lik[i] = ll + unpredicted * options_.unpredicted_log_likelihood;
+  });
+  predicted_.assign(map_.size(), false);
+  report.log_likelihoods = log_lik;
+  report.nis = nis;
+  report.gaussian_ids = gaussian_ids_;
+
+  if (!(log_lik.maxCoeff() > -kInf)) {
+    // Every filter failed (nothing can be weighed): leave the bank as it is.
+    report.num_gaussians = num_gaussians();
+    report.pruning_active = pruning_active_;
+    return report;
+  }
+  // Weights (eq. 2) and the SPRT (eq. 14-18), both from the weights before this frame.
+  const Eigen::VectorXd tempered = log_lik / options_.likelihood_temperature;
+  const Eigen::VectorXd ratios = SprtLogRatios(log_weights_, tempered);
+  log_weights_ = UpdateLogWeights(log_weights_, tempered);
+  std::vector<bool> remove(n_filters, false);
+  for (int i = 0; i < n_filters; ++i) remove[i] = !std::isfinite(log_weights_[i]);
+  if (options_.prune && n_filters > 1) {
+    const int lead = leading_gaussian();
+    if (!pruning_active_) {
+      const double sigma_f = std::sqrt(filters_[lead].covariance()(0, 0));
+      pruning_active_ = frame_ >= options_.guard_min_frames &&
+                        accumulated_rotation_rad_ >= options_.guard_min_rotation_deg * M_PI / 180.0 &&
+                        sigma_f <= options_.guard_f_sigma_ratio * initial_f_sigma_[lead];
+    }
+    if (pruning_active_) {
+      const WaldBoundaries wald = MakeWaldBoundaries(options_.sprt_alpha, options_.sprt_beta);
+      for (int i = 0; i < n_filters; ++i) {
+        if (log_weights_[i] < options_.min_log_weight && i != lead) remove[i] = true;
+        if (sprt_accepted_[i]) continue;
+        sprt_statistic_[i] += ratios[i];
+        if (sprt_statistic_[i] > wald.log_accept) {
+          if (options_.sprt_keep_accepted) sprt_accepted_[i] = true;
+          else sprt_statistic_[i] = 0.0;  // decided "keep": start a new test
+        } else if (sprt_statistic_[i] < wald.log_reject && i != lead) {
+          remove[i] = true;
+        }
+      }
+      MergeConverged(&remove, &report);
+    }
+  }
+  if (std::find(remove.begin(), remove.end(), false) == remove.end())
+    remove[leading_gaussian()] = false;  // never empty the bank
+  Prune(remove, &report);
+  report.pruning_active = pruning_active_;
+  report.num_gaussians = num_gaussians();
+  ManageMap(&report);
+  return report;
+}
+
+void SogBank::MergeConverged(std::vector<bool>* remove, SogUpdateReport* report) {
+  // Gaussians accepted by the SPRT are never pruned; two that have converged to the same
+  // calibration are one hypothesis: keep the heavier filter with the summed weight.
+  if (!(options_.merge_mahalanobis2 > 0.0)) return;
+  std::vector<int> order(num_gaussians());
+  for (int i = 0; i < num_gaussians(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](int a, int b) { return log_weights_[a] > log_weights_[b]; });
+  for (size_t a = 0; a < order.size(); ++a) {
+    const int i = order[a];
+    if ((*remove)[i]) continue;
+    for (size_t b = a + 1; b < order.size(); ++b) {
+      const int j = order[b];
+      if ((*remove)[j]) continue;
+      const Vector5d d = filters_[i].calibration() - filters_[j].calibration();
+      const Matrix5d c = filters_[i].calibration_covariance() + filters_[j].calibration_covariance();
+      const Eigen::LDLT<Matrix5d> ldlt(c);
+      if (ldlt.info() != Eigen::Success || !(d.dot(ldlt.solve(d)) < options_.merge_mahalanobis2)) continue;
+      (*remove)[j] = true;
+      const double hi = std::max(log_weights_[i], log_weights_[j]);
+      log_weights_[i] = hi + std::log(std::exp(log_weights_[i] - hi) + std::exp(log_weights_[j] - hi));
+      log_weights_[j] = -kInf;
+      report->merged_gaussian_ids.push_back(gaussian_ids_[j]);
+    }
+  }
+}
+
+void SogBank::Prune(const std::vector<bool>& remove, SogUpdateReport* report) {
+  if (std::find(remove.begin(), remove.end(), true) == remove.end()) return;
+  std::vector<SelfCalibrationEkf> filters;
+  std::vector<int> ids;
+  std::vector<double> sigma0;
+  std::vector<double> log_w, stat;
+  std::vector<bool> accepted;
+  std::vector<std::vector<FeaturePrediction>> predictions;
+  for (int i = 0; i < num_gaussians(); ++i) {
+    if (remove[i]) {
+      const auto& merged = report->merged_gaussian_ids;
+      if (std::find(merged.begin(), merged.end(), gaussian_ids_[i]) == merged.end())
+        report->pruned_gaussian_ids.push_back(gaussian_ids_[i]);
+      continue;
+    }
+    filters.push_back(std::move(filters_[i]));
+    ids.push_back(gaussian_ids_[i]);
+    sigma0.push_back(initial_f_sigma_[i]);
+    log_w.push_back(log_weights_[i]);
+    stat.push_back(sprt_statistic_[i]);
+    accepted.push_back(sprt_accepted_[i]);
+    predictions.push_back(std::move(predictions_[i]));
+  }
+  filters_.swap(filters);
+  gaussian_ids_.swap(ids);
+  initial_f_sigma_.swap(sigma0);
+  log_weights_ = Eigen::Map<Eigen::VectorXd>(log_w.data(), static_cast<Eigen::Index>(log_w.size()));
+  log_weights_.array() -= LogSumExp(log_weights_);
+  sprt_statistic_ = Eigen::Map<Eigen::VectorXd>(stat.data(), static_cast<Eigen::Index>(stat.size()));
+  sprt_accepted_.swap(accepted);
+  predictions_.swap(predictions);
+}
+
+void SogBank::ManageMap(SogUpdateReport* report) {
+  const int count = map_.size();
+  std::vector<bool> remove(count, false), convert(count, false);
+  for (int k = 0; k < count; ++k) {
+    const MapFeature& f = map_[k];
+    remove[k] = f.times_predicted > options_.deletion_min_predictions &&
+                f.times_matched < options_.deletion_min_match_ratio * f.times_predicted;
+  }
+  if (options_.linearity_threshold > 0.0) {
+    // Converted when linear enough in every filter, so the map structure stays shared.
+    std::vector<std::vector<double>> index(num_gaussians(), std::vector<double>(count, kInf));
+    ForEachFilter([&](int i) {
+      const SelfCalibrationEkf& filter = filters_[i];
+      const Eigen::Vector3d r = filter.mean().segment<3>(kPosition);
+      for (int k = 0; k < count; ++k) {
+        const MapFeature& f = map_[k];
+        if (remove[k] || f.kind != FeatureKind::kInverseDepth) continue;
+        const int rho = f.offset + 5;
+        index[i][k] = LinearityIndex(filter.mean().segment<6>(f.offset),
+                                     filter.covariance()(rho, rho), r);
+      }
+    });
+    for (int k = 0; k < count; ++k) {
+      if (remove[k] || map_[k].kind != FeatureKind::kInverseDepth) continue;
+      double worst = 0.0;
+      for (int i = 0; i < num_gaussians(); ++i) worst = std::max(worst, index[i][k]);
+      convert[k] = worst < options_.linearity_threshold;
+    }
+  }
+  for (int k = 0; k < count; ++k) {
+    if (remove[k]) report->deleted_feature_ids.push_back(map_[k].id);
+    else if (convert[k]) report->converted_feature_ids.push_back(map_[k].id);
+  }
+  Restructure(remove, convert);
+}
+
+void SogBank::Restructure(const std::vector<bool>& remove, const std::vector<bool>& convert) {
+  const StateRestructure plan = map_.Plan(remove, convert);
+  if (plan.trivial) return;
+  ForEachFilter([&](int i) { filters_[i].Restructure(plan); });
+  map_.Apply(remove, convert);
+  for (auto& p : predictions_) p.clear();
+  predicted_.assign(map_.size(), false);
+}
+
+std::vector<int64_t> SogBank::AddFeatures(const std::vector<Eigen::Vector2d>& uv) {
+  for (const Eigen::Vector2d& p : uv)
+    if (!p.allFinite()) throw InputError("SogBank.add_features: pixels must be finite");
+  if (uv.empty()) return {};
+  std::vector<char> ok(num_gaussians(), 1);
+  ForEachFilter([&](int i) {
+    ok[i] = filters_[i].AddInverseDepthFeatures(uv, pixel_size_mm_, options_.initial_inverse_depth,
+                                                options_.initial_inverse_depth_sigma,
+                                                options_.pixel_sigma);
+  });
+  if (std::find(ok.begin(), ok.end(), 0) != ok.end())
+    throw InputError("SogBank.add_features: a filter could not back-project the pixels");
+  const std::vector<int64_t> ids = map_.AddInverseDepth(static_cast<int>(uv.size()), frame_);
+  predicted_.resize(map_.size(), false);
+  for (auto& p : predictions_) p.resize(map_.size());
+  return ids;
+}
+
+void SogBank::RemoveFeatures(const std::vector<int64_t>& ids) {
+  std::vector<bool> remove(map_.size(), false), convert(map_.size(), false);
+  for (int64_t id : ids) {
+    const int k = map_.IndexOf(id);
+    if (k < 0) throw InputError("SogBank.remove_features: unknown feature id " + std::to_string(id));
+    remove[k] = true;
+  }
+  Restructure(remove, convert);
+}
+
+void SogBank::CalibrationMoments(Vector5d* mean, Matrix5d* covariance) const {
+  std::vector<double> w(num_gaussians());
+  std::vector<Vector5d> means(num_gaussians());
+  std::vector<Matrix5d> covs(num_gaussians());
+  for (int i = 0; i < num_gaussians(); ++i) {
+    w[i] = std::exp(log_weights_[i]);
+    means[i] = filters_[i].calibration();
+    covs[i] = filters_[i].calibration_covariance();
+  }
+  MergeGaussians<5>(w, means, covs, mean, covariance);
+}
+
+void SogBank::MotionMoments(MotionState* mean, Matrix13d* covariance) const {
+  std::vector<double> w(num_gaussians());
+  std::vector<MotionState> means(num_gaussians());
+  std::vector<Matrix13d> covs(num_gaussians());
+  for (int i = 0; i < num_gaussians(); ++i) {
+    w[i] = std::exp(log_weights_[i]);
+    means[i] = filters_[i].mean().segment<13>(kPosition);
+    covs[i] = filters_[i].covariance().block<13, 13>(kPosition, kPosition);
+  }
+  MergeGaussians<13>(w, means, covs, mean, covariance);
+}
+
+}  // namespace rscalib::sog

@@ -1,0 +1,100 @@
+"""Self-calibration from images (issue 5): the front end's active search, the civera -> OpenCV
+conversion, and `rscalib selfcalib` on a rendered textured-room sequence."""
+import json
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+import rscalib
+from rscalib.camera_io import read_camera
+from rscalib.selfcalib import FrontEndOptions, active_search, civera_to_opencv
+
+CLI = [sys.executable, "-m", "rscalib.cli"]
+PAPER = [194.06, 160.22, 128.87, 0.06333, 0.0139]
+
+
+def textured(seed=0, shape=(240, 320)):
+    rng = np.random.default_rng(seed)
+    image = cv2.GaussianBlur(rng.uniform(0, 255, shape).astype(np.float32), (0, 0), 2.0)
+    return cv2.normalize(image, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+
+
+def test_active_search_finds_a_shifted_patch_inside_its_ellipse_only():
+    image = textured(1)
+    shift = np.array([3.0, -2.0])
+    moved = np.roll(np.roll(image, int(shift[1]), axis=0), int(shift[0]), axis=1)
+    uv0 = np.array([[150.0, 110.0], [60.0, 70.0]])
+    patches = {i: image[int(v) - 5:int(v) + 6, int(u) - 5:int(u) + 6].copy() for i, (u, v) in enumerate(uv0)}
+    ids = np.array([0, 1])
+    wide = np.stack([np.eye(2) * 16.0, np.eye(2) * 16.0])       # 99 % ellipse radius ~12 px
+    uv, found = active_search(moved, patches, ids, uv0, wide, FrontEndOptions())
+    assert found.all()
+    assert np.abs(uv - (uv0 + shift)).max() < 0.25
+    narrow = np.stack([np.eye(2) * 0.3, np.eye(2) * 0.3])       # radius ~1.7 px: the match is outside
+    uv, found = active_search(moved, patches, ids, uv0, narrow, FrontEndOptions())
+    # whatever is accepted lies inside the ellipse, never at the true position 3.6 px away
+    radius = np.sqrt(9.21 * 0.3)
+    assert np.all(np.linalg.norm(uv[found] - uv0[found], axis=1) <= radius + 0.5)
+    assert np.all(np.linalg.norm(uv[found] - (uv0[found] + shift), axis=1) > 1.0)
+
+
+def test_civera_to_opencv_reproduces_the_model_and_reports_its_error():
+    camera = rscalib.CameraModel("civera-radial", PAPER, 320, 240, pixel_size_mm=(0.0112, 0.0112))
+    opencv, max_error = civera_to_opencv(camera)
+    # independent check on points inside the central 80 % of the image
+    us, vs = np.meshgrid(np.linspace(32, 288, 9), np.linspace(24, 216, 7))
+    uv_d = np.c_[us.ravel(), vs.ravel()]
+    rays = camera.unproject(uv_d)
+    k, dist = rscalib.camera.opencv_matrices(opencv)
+    uv_cv = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), k, dist)[0].reshape(-1, 2)
+    assert np.abs(uv_cv - uv_d).max() < 1.0
+    assert np.abs(uv_cv - uv_d).max() <= max_error + 1e-9
+    assert max_error < 10.0
+
+
+@pytest.fixture(scope="module")
+def room_sequence(tmp_path_factory):
+    from rscalib.scene_render import render_scene_sequence
+
+    out = tmp_path_factory.mktemp("room")
+    render_scene_sequence(out, num_frames=150, seed=1)
+    return out
+
+
+def test_selfcalib_cli_recovers_the_focal_length(room_sequence, tmp_path):
+    proc = subprocess.run([*CLI, "selfcalib", room_sequence, "--out", tmp_path / "res", "--quiet"],
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode in (0, 3), proc.stderr
+    result = json.loads((tmp_path / "res" / "result.json").read_text())
+    truth = json.loads((room_sequence / "truth.json").read_text())["camera"]["params"]
+    assert abs(result["f"] - truth[0]) < 0.03 * truth[0]
+    for name in ("f", "cx", "cy", "k1", "k2"):
+        lo, hi = result[f"{name}_bounds_99"]
+        assert lo <= result[name] <= hi
+    assert result["frames_processed"] == 150
+    assert result["gaussians_left"] < 108
+    assert len(result["history"]["gaussians"]) == 150
+    assert (tmp_path / "res" / "history.png").stat().st_size > 0
+    camera = read_camera(tmp_path / "res" / "camera.yaml").camera
+    assert camera.model == "pinhole-radtan"
+    assert camera.params[0] == pytest.approx(result["f"])
+
+
+@pytest.mark.parametrize("case", ["missing source", "bad pixel size", "empty folder"])
+def test_selfcalib_bad_input_exits_2(tmp_path, case):
+    source = tmp_path / "frames"
+    source.mkdir()
+    extra = []
+    if case == "missing source":
+        source = tmp_path / "nope"
+    elif case == "bad pixel size":
+        cv2.imwrite(str(source / "a.png"), textured(2))
+        extra = ["--pixel-size-mm", "-1"]
+    proc = subprocess.run([*CLI, "selfcalib", source, "--out", tmp_path / "o", "--quiet", *extra],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, (case, proc.stderr)
+    assert "Traceback" not in proc.stderr
+    assert len([line for line in proc.stderr.splitlines() if line.strip()]) == 1
