@@ -43,7 +43,7 @@ bench: install
 
 stubs: install
 	$(PIP) install -q pybind11-stubgen
-	$(VENV)/bin/pybind11-stubgen rscalib._core -o python --numpy-array-use-type-var
+	$(VENV)/bin/pybind11-stubgen rscalib._core -o python
 
 clean:
 	rm -rf build $(VENV)

@@ -39,7 +39,7 @@ def main() -> None:
 
         result = self_calibrate(zip(frames.timestamps_s, frames.images), (frames.camera.width, frames.camera.height),
                                 progress=progress)
-        inside = [(result.bounds_99[i, 0] <= truth[i] <= result.bounds_99[i, 1]) for i in range(5)]
+        inside = [bool(result.bounds_99[i, 0] <= truth[i] <= result.bounds_99[i, 1]) for i in range(5)]
         many = [dt for n, dt in fps_trace[1:] if n > 50]
         one = [dt for n, dt in fps_trace[1:] if n == 1]
         few = [dt for n, dt in fps_trace[1:] if n <= 5]

@@ -19,7 +19,7 @@ py::ssize_t CheckRows(const DoubleArray& array, py::ssize_t width, const char* w
 
 PYBIND11_MODULE(_core, m) {
   namespace py = pybind11;
-  m.doc() = "C++ core of rscalib: B-spline trajectories and camera models.";
+  m.doc() = "C++ core of rscalib: B-spline trajectories, camera models, the rolling-shutter solver and the SOG filter bank.";
   m.attr("__version__") = RSCALIB_VERSION;
   py::register_exception<rscalib::InputError>(m, "InputError", PyExc_ValueError);
   rscalib::python::BindSpline(m);

@@ -17,6 +17,7 @@ from ._core import (
 from .errors import InputError
 from .linedelay import LineDelayResult, calibrate_line_delay, localize
 from .observations import Observations
+from .selfcalib import SelfCalibResult, self_calibrate
 
 try:
     __version__ = _version("rscalib")
@@ -29,12 +30,14 @@ __all__ = [
     "InputError",
     "LineDelayResult",
     "Observations",
+    "SelfCalibResult",
     "calibrate_line_delay",
     "localize",
     "fit_bspline",
     "poses_at",
     "rotation_matrix_to_vector",
     "rotation_vector_to_matrix",
+    "self_calibrate",
     "unwrap_rotation_vectors",
     "__version__",
 ]
