@@ -28,6 +28,7 @@ import numpy as np
 import rscalib
 from rscalib.detect import Detector, detect_video, usable_cores
 from rscalib.targets import target_from_dict
+import _common  # noqa: E402  (benchmarks/_common.py: machine record, results file)
 
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_detect.json"
 
@@ -70,18 +71,7 @@ def render_frames(target, size, count, seed):
 
 
 def machine_info() -> dict:
-    cpu_model = platform.processor() or "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.lower().startswith("model name"):
-                cpu_model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
-    return {"usable_cores": usable_cores(), "cpu_count": os.cpu_count(), "cpu_model": cpu_model,
-            "platform": platform.platform(), "python": sys.version.split()[0], "numpy": np.__version__,
-            "opencv": cv2.__version__, "rscalib": rscalib.__version__, "load_average_1min_at_start": load}
+    return _common.machine_info(usable_cores=usable_cores(), opencv=cv2.__version__)
 
 
 def main() -> int:
@@ -133,17 +123,7 @@ def main() -> int:
     print(f"\n{info['cpu_model']}, {info['usable_cores']} usable cores, OpenCV {info['opencv']}, "
           f"load average {info['load_average_1min_at_start']}\n")
     print(table)
-    result = {
-        "benchmark": "bench_detect",
-        "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-        "machine": info,
-        "settings": {"frames_per_case": args.frames, "sizes": args.sizes, "video_codec": "MJPG quality 95"},
-        "results": rows,
-        "table_markdown": table,
-    }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"\nwritten {args.out}")
+    _common.write_results(args.out, "bench_detect", info, {"frames_per_case": args.frames, "sizes": args.sizes, "video_codec": "MJPG quality 95"}, rows, table)
     return 0
 
 

@@ -25,7 +25,8 @@ import numpy as np
 from rscalib import render
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_spline import machine_info  # noqa: E402  (one definition of the machine record)
+from _common import machine_info  # noqa: E402  (one definition of the machine record)
+import _common  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_render.json"
 
@@ -94,20 +95,10 @@ def main() -> int:
     table = "\n".join(lines)
     info = machine_info()
     print(f"Rolling-shutter rendering, default camera and hand-held motion, {frames} frames per case.")
-    print(f"{info['cpu_model']}, nproc {info['nproc']}, Python {info['python']}\n")
+    print(f"{info['cpu_model']}, nproc {info['usable_cores']}, Python {info['python']}\n")
     print(table)
-    result = {
-        "benchmark": "bench_render",
-        "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-        "machine": info,
-        "settings": {"frames": frames, "workers": args.workers, "exposure_s": args.exposure,
-                     "line_delay_s": 30e-6, "target": "checkerboard"},
-        "results": rows,
-        "table_markdown": table,
-    }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"\nwritten {args.out}")
+    _common.write_results(args.out, "bench_render", info, {"frames": frames, "workers": args.workers, "exposure_s": args.exposure,
+                     "line_delay_s": 30e-6, "target": "checkerboard"}, rows, table)
     return 0
 
 

@@ -25,6 +25,7 @@ import scipy.interpolate as si
 import scipy.spatial.transform
 
 import rscalib
+import _common  # noqa: E402  (benchmarks/_common.py: machine record, results file)
 
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_spline.json"
 
@@ -41,28 +42,7 @@ def best_time(fn, repeats: int) -> float:
 
 
 def machine_info() -> dict:
-    cpu_model = platform.processor() or "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.lower().startswith("model name"):
-                cpu_model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        nproc = int(subprocess.run(["nproc"], capture_output=True, text=True, check=True).stdout)
-    except (OSError, subprocess.CalledProcessError, ValueError):
-        nproc = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return {
-        "nproc": nproc,
-        "cpu_count": os.cpu_count(),
-        "cpu_model": cpu_model,
-        "platform": platform.platform(),
-        "python": sys.version.split()[0],
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "rscalib": rscalib.__version__,
-    }
+    return _common.machine_info(scipy=scipy.__version__)
 
 
 def main() -> int:
@@ -138,21 +118,11 @@ def main() -> int:
     info = machine_info()
     print(f"Spline evaluation, {args.segments} non-uniform segments, {n} random times per "
           f"vectorised call, {m} scalar calls; best of {args.repeats}.")
-    print(f"{info['cpu_model']}, nproc {info['nproc']}, Python {info['python']}\n")
+    print(f"{info['cpu_model']}, nproc {info['usable_cores']}, Python {info['python']}\n")
     print(table)
 
-    result = {
-        "benchmark": "bench_spline",
-        "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-        "machine": info,
-        "settings": {"segments": args.segments, "dimension": 6, "times_per_call": n,
-                     "scalar_calls": m, "repeats": args.repeats},
-        "results": rows,
-        "table_markdown": table,
-    }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"\nwritten {args.out}")
+    _common.write_results(args.out, "bench_spline", info, {"segments": args.segments, "dimension": 6, "times_per_call": n,
+                     "scalar_calls": m, "repeats": args.repeats}, rows, table)
     return 0
 
 
