@@ -24,6 +24,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sequences", type=int, default=10)
     parser.add_argument("--frames", type=int, default=150)
+    parser.add_argument("--pixel-sigma", type=float, default=None, help="SogOptions.pixel_sigma (default: the bank's)")
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "bench_selfcalib.json")
     args = parser.parse_args()
     runs = []
     for seed in range(args.sequences):
@@ -37,8 +39,11 @@ def main() -> None:
             fps_trace.append((bank.num_gaussians, now - last[0]))
             last[0] = now
 
+        options = rscalib._core.SogOptions()
+        if args.pixel_sigma is not None:
+            options.pixel_sigma = args.pixel_sigma
         result = self_calibrate(zip(frames.timestamps_s, frames.images), (frames.camera.width, frames.camera.height),
-                                progress=progress)
+                                options=options, progress=progress)
         inside = [bool(result.bounds_99[i, 0] <= truth[i] <= result.bounds_99[i, 1]) for i in range(5)]
         many = [dt for n, dt in fps_trace[1:] if n > 50]
         one = [dt for n, dt in fps_trace[1:] if n == 1]
@@ -68,7 +73,7 @@ def main() -> None:
     def mean_of(key):
         vals = [r[key] for r in runs if r[key] is not None]
         return float(np.mean(vals)) if vals else None
-    summary = dict(sequences=len(runs), frames=args.frames, coverage=dict(zip(PARAM_NAMES, coverage.tolist())),
+    summary = dict(sequences=len(runs), frames=args.frames, pixel_sigma=options.pixel_sigma, coverage=dict(zip(PARAM_NAMES, coverage.tolist())),
                    f_error_median=float(np.median(f_err)), f_error_max=float(f_err.max()),
                    f_within_1pct=float(np.mean(f_err <= 0.01)), all_inside=float(all_in),
                    fps_over_50_gaussians=mean_of("fps_over_50_gaussians"), fps_one_gaussian=mean_of("fps_one_gaussian"),
@@ -76,7 +81,7 @@ def main() -> None:
                    collapse_frames=[r["collapse_frame"] for r in runs],
                    gaussians_left=[r["gaussians_left"] for r in runs])
     print(json.dumps({k: v for k, v in summary.items() if k.startswith("fps") or k.startswith("collapse")}, indent=1))
-    out = Path(__file__).parent / "results" / "bench_selfcalib.json"
+    out = args.out
     out.write_text(json.dumps(dict(date=time.strftime("%Y-%m-%d"), cores=os.cpu_count(), rscalib=rscalib.__version__,
                                    summary=summary, runs=runs), indent=1))
     print(f"written {out}")
