@@ -23,7 +23,8 @@ scene description, seed).
 from __future__ import annotations
 
 import json
-import math
+import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator, Optional, Sequence, Union
@@ -96,7 +97,8 @@ def procedural_texture(width_m: float, height_m: float, seed: int, texels_per_m:
     octaves_m, weights = (0.01, 0.04, 0.15), (0.3, 0.35, 0.35)
     noise = sum(w * _smooth_noise(rng, (h_tx, w_tx), s * texels_per_m) for s, w in zip(octaves_m, weights))
 
-    canvas = np.full((h_tx, w_tx), 128, dtype=np.uint8)
+    # Base grey differs per plane so that the room's edges show as well.
+    canvas = np.full((h_tx, w_tx), int(rng.uniform(95, 160)), dtype=np.uint8)
     n_shapes = rng.poisson(shapes_per_m2 * width_m * height_m)
     lo, hi = np.log(size_range_m[0]), np.log(size_range_m[1])
     sizes_m = np.sort(np.exp(rng.uniform(lo, hi, n_shapes)))[::-1]  # big first: small ones stay visible
@@ -210,7 +212,8 @@ def room_scene(seed: int = 0, size_m: Sequence[float] = (4.0, 3.0, 2.5), texels_
 
 def planes_scene(seed: int = 0, texels_per_m: float = 200.0, num_planes: int = 4) -> Scene:
     """Several free-standing textured panels at 2–4.5 m in front of a camera near the origin looking
-    along +x (world z up), at seeded positions and tilts, in front of a far back wall (x = 6 m)."""
+    along +x (world z up), at seeded positions and tilts, over a floor (z = 0, x ∈ [0, 7] m) and in
+    front of a back wall (x = 7 m, 20 × 8 m). Open scene: rays going up or back hit nothing."""
     rng = np.random.default_rng([0x91A5, int(seed)])
     planes = []
     ez = np.array([0.0, 0.0, 1.0])
@@ -226,10 +229,14 @@ def planes_scene(seed: int = 0, texels_per_m: float = 200.0, num_planes: int = 4
         planes.append(TexturedPlane(f"panel_{k}", origin, axis_u, -ez, (width_m, height_m),
                                     procedural_texture(width_m, height_m, tex_seed, texels_per_m),
                                     texels_per_m, texture_seed=tex_seed))
-    back_seed = int(seed) * 16 + 15
-    planes.append(TexturedPlane("back_wall", (6.0, 4.0, 3.5), (0.0, -1.0, 0.0), -ez, (8.0, 3.5),
-                                procedural_texture(8.0, 3.5, back_seed, texels_per_m / 2), texels_per_m / 2,
-                                texture_seed=back_seed))
+    # Far surroundings at half the texel density with larger shapes (they are seen from far away).
+    far = dict(texels_per_m=texels_per_m / 2, shapes_per_m2=15.0, size_range_m=(0.08, 0.8))
+    for name, origin, axis_u, axis_v, size, tex_seed in (
+            ("back_wall", (7.0, 10.0, 8.0), (0.0, -1.0, 0.0), -ez, (20.0, 8.0), int(seed) * 16 + 14),
+            ("floor", (0.0, 10.0, 0.0), (1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (7.0, 20.0), int(seed) * 16 + 15)):
+        planes.append(TexturedPlane(name, origin, axis_u, axis_v, size,
+                                    procedural_texture(size[0], size[1], tex_seed, **far), far["texels_per_m"],
+                                    texture_seed=tex_seed))
     return Scene(planes, description="panels in front of a back wall, camera looking along +x, z up")
 
 
@@ -394,12 +401,16 @@ class SceneRenderer:
 
     The per-sample rays (camera frame, z = 1) and their angular spacing are computed once;
     :meth:`render` then costs one small matmul, a ray–plane test per plane and a trilinear texture
-    gather per sample. ``supersampling`` = n gives n×n samples per pixel on a regular sub-grid.
+    gather per sample. ``supersampling`` = n gives n×n samples per pixel on a regular sub-grid;
+    ``threads`` > 1 renders chunks of samples in parallel (same image).
     """
 
-    def __init__(self, camera: CameraModel, scene: Scene, supersampling: int = 2) -> None:
-        if supersampling < 1:
-            raise ValueError("SceneRenderer: supersampling must be >= 1")
+    def __init__(self, camera: CameraModel, scene: Scene, supersampling: int = 2, threads: int = 1,
+                 chunk_samples: int = 16384) -> None:
+        if supersampling < 1 or threads < 1 or chunk_samples < 1:
+            raise ValueError("SceneRenderer: supersampling, threads and chunk_samples must be >= 1")
+        self.threads = int(threads)
+        self.chunk_samples = int(chunk_samples)
         self.camera = camera
         self.scene = scene
         self.supersampling = int(supersampling)
@@ -411,15 +422,17 @@ class SceneRenderer:
         u = (np.arange(self.width)[:, None] + offsets[None, :]).reshape(-1)
         uu, vv = np.meshgrid(u, v)
         uv = np.column_stack([uu.ravel(), vv.ravel()])
-        self.rays_c = np.asarray(camera.unproject(uv), dtype=np.float64)  # (N, 3), z = 1
-        self._ray_norm = np.linalg.norm(self.rays_c, axis=1)
+        rays_c = np.asarray(camera.unproject(uv), dtype=np.float64)  # (N, 3), z = 1
+        self._ray_norm = np.linalg.norm(rays_c, axis=1).astype(np.float32)
+        self.rays_c = rays_c.astype(np.float32)  # float32 suffices for shading (< 1e-6 m error)
         # Angle between neighbouring samples (geometric mean over u and v): the footprint that
         # picks the mip level. Changes across the image because of the distortion.
         h = 0.5 / n
         d = [np.asarray(camera.unproject(uv + off), dtype=np.float64) for off in
              ([h, 0], [-h, 0], [0, h], [0, -h])]
         d = [di / np.linalg.norm(di, axis=1, keepdims=True) for di in d]
-        self._sample_angle_rad = np.sqrt(np.linalg.norm(d[0] - d[1], axis=1) * np.linalg.norm(d[2] - d[3], axis=1))
+        self._sample_angle_rad = np.sqrt(np.linalg.norm(d[0] - d[1], axis=1)
+                                         * np.linalg.norm(d[2] - d[3], axis=1)).astype(np.float32)
         self._atlas = _build_atlas(scene.planes)
         P = len(scene.planes)
         self._origins = np.array([pl.origin_m for pl in scene.planes]).reshape(P, 3)
@@ -432,29 +445,41 @@ class SceneRenderer:
     def _intersect(self, rays_c: np.ndarray, R: np.ndarray, p: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Nearest hit of each ray (z = 1 in the camera frame): plane index k (−1: none), ray
-        parameter t (= depth, since ray z = 1), plane coordinates s, w (m), |cos incidence|·|ray|."""
+        parameter t (= depth, since ray z = 1), plane coordinates s, w (m), |cos incidence|·|ray|.
+        Works in the dtype of ``rays_c`` (float32 for rendering speed, float64 for exact truth)."""
+        dtype = rays_c.dtype
         R = np.asarray(R, dtype=np.float64).reshape(3, 3)
         p = np.asarray(p, dtype=np.float64).reshape(3)
         centre_w = -R.T @ p
         P = len(self.scene.planes)
         # d_w · a = d_c · (R a): dot products with every plane axis straight from the camera rays.
-        axes_c = np.einsum("ij,pjk->ipk", R, self._axes).reshape(3, 3 * P)
-        dots = (rays_c @ axes_c).reshape(-1, P, 3)  # (N, P, [n·d, u·d, v·d])
+        # Columns grouped [normals | axes_u | axes_v] so each group is a contiguous (N, P) block.
+        axes_c = np.einsum("ij,pjk->ikp", R, self._axes).reshape(3, 3 * P).astype(dtype)
+        dots = rays_c @ axes_c
         rel = centre_w[None, :] - self._origins      # (P, 3) camera centre relative to plane origins
-        rel_dots = np.einsum("pj,pjk->pk", rel, self._axes)  # (P, [n·rel, u·rel, v·rel])
-        den = dots[:, :, 0]
+        rel_dots = np.einsum("pj,pjk->pk", rel, self._axes).astype(dtype)  # (P, [n·rel, u·rel, v·rel])
+        den = dots[:, :P]
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = -rel_dots[None, :, 0] / den
-        s = rel_dots[None, :, 1] + t * dots[:, :, 1]
-        w = rel_dots[None, :, 2] + t * dots[:, :, 2]
+            t = np.divide(-rel_dots[:, 0], den)
+        s = dots[:, P:2 * P] * t
+        s += rel_dots[:, 1]
+        w = dots[:, 2 * P:] * t
+        w += rel_dots[:, 2]
         tol = _HIT_TOLERANCE_M
-        ok = ((t > 1e-9) & (s >= -tol) & (s <= self._sizes[None, :, 0] + tol)
-              & (w >= -tol) & (w <= self._sizes[None, :, 1] + tol))
-        t_masked = np.where(ok, t, np.inf)
+        size_u = (self._sizes[:, 0] + tol).astype(dtype)
+        size_v = (self._sizes[:, 1] + tol).astype(dtype)
+        # Outside the rectangle or behind the camera: push t to +inf (NaN from den = 0 fails t > 0).
+        bad = ~(t > 1e-9)
+        bad |= s < -tol
+        bad |= s > size_u
+        bad |= w < -tol
+        bad |= w > size_v
+        t_masked = t.copy()
+        t_masked[bad] = np.inf
         k = np.argmin(t_masked, axis=1)
         rows = np.arange(len(k))
         hit = np.isfinite(t_masked[rows, k])
-        k = np.where(hit, k, -1)
+        k[~hit] = -1
         return k, t[rows, k], s[rows, k], w[rows, k], np.abs(den[rows, k])
 
     def surface(self, R: np.ndarray, p: np.ndarray, uv: Optional[np.ndarray] = None) -> SurfaceHits:
@@ -506,19 +531,38 @@ class SceneRenderer:
         bottom = f[idx + width] + fx * (f[idx + width + 1] - f[idx + width])
         return top + fy * (bottom - top)
 
-    def render(self, R: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """Grey image (H, W) float32 in [0, 1] seen from pose ``x_c = R x_w + p``."""
-        k, t, s, w, cos_abs = self._intersect(self.rays_c, R, p)
+    def _shade(self, start: int, stop: int, R: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Texture values of samples start … stop − 1."""
+        k, t, s, w, cos_abs = self._intersect(self.rays_c[start:stop], R, p)
         values = np.full(len(k), self.scene.background, dtype=np.float32)
         hit = k >= 0
-        kh = k[hit]
         # Footprint of one sample on the plane: range × angle, stretched by 1/√cos (geometric mean of
         # the foreshortened and the unforeshortened axis).
-        norm = self._ray_norm[hit]
+        norm = self._ray_norm[start:stop][hit]
         range_m = t[hit] * norm
         cos_inc = np.maximum(cos_abs[hit] / norm, 1e-3)
-        footprint_m = range_m * self._sample_angle_rad[hit] / np.sqrt(cos_inc)
-        values[hit] = self._sample_texture(kh, s[hit], w[hit], footprint_m)
+        footprint_m = range_m * self._sample_angle_rad[start:stop][hit] / np.sqrt(cos_inc)
+        values[hit] = self._sample_texture(k[hit], s[hit], w[hit], footprint_m)
+        return values
+
+    def render(self, R: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Grey image (H, W) float32 in [0, 1] seen from pose ``x_c = R x_w + p``."""
+        N = len(self.rays_c)
+        values = np.empty(N, dtype=np.float32)
+        # Chunks of samples keep the (samples × planes) temporaries in cache: ~1.5x faster than
+        # one pass over the whole image; threads split the chunks (NumPy releases the GIL).
+        starts = range(0, N, self.chunk_samples)
+
+        def work(start: int) -> None:
+            stop = min(start + self.chunk_samples, N)
+            values[start:stop] = self._shade(start, stop, R, p)
+
+        if self.threads > 1:
+            with ThreadPoolExecutor(self.threads) as pool:
+                list(pool.map(work, starts))
+        else:
+            for start in starts:
+                work(start)
         n = self.supersampling
         return values.reshape(self.height, n, self.width, n).mean(axis=(1, 3))
 
@@ -628,8 +672,6 @@ def render_scene_sequence(out_dir: Union[str, Path], num_frames: int = 300, seed
 
     Same arguments as :func:`render_scene_frames`; frames are written as they are rendered.
     """
-    import time
-
     start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
