@@ -572,11 +572,9 @@ class SceneRenderer:
 
 
 @dataclass
-class RenderedFrames:
-    """Frames in memory: ``images`` (F, H, W) uint8; pose ``x_c = R_cw[i] x_w + p_cw[i]`` at
-    ``timestamps_s[i]``; the renderer gives per-pixel truth (:meth:`SceneRenderer.surface`)."""
+class _PosedFrames:
+    """Frame times and poses ``x_c = R_cw[i] x_w + p_cw[i]``; the renderer gives per-pixel truth."""
 
-    images: np.ndarray
     timestamps_s: np.ndarray
     R_cw: np.ndarray
     p_cw: np.ndarray
@@ -597,29 +595,20 @@ class RenderedFrames:
 
 
 @dataclass
-class SceneSequence:
+class RenderedFrames(_PosedFrames):
+    """Frames in memory: ``images`` (F, H, W) uint8, one per timestamp."""
+
+    images: np.ndarray = None
+
+
+@dataclass
+class SceneSequence(_PosedFrames):
     """A rendered sequence on disk (``frame_paths`` in file-name order) and its truth."""
 
-    out_dir: Path
-    frame_paths: list[Path]
-    timestamps_s: np.ndarray
-    R_cw: np.ndarray
-    p_cw: np.ndarray
-    camera: CameraModel
-    renderer: SceneRenderer
-    trajectory: Any
-    fps: float
-    seed: int
-    noise_sigma: float
-    truth_path: Path
-    elapsed_s: float
-
-    @property
-    def camera_centers_w(self) -> np.ndarray:
-        return -np.einsum("nji,nj->ni", self.R_cw, self.p_cw)
-
-    def surface(self, frame: int, uv: Optional[np.ndarray] = None) -> SurfaceHits:
-        return self.renderer.surface(self.R_cw[frame], self.p_cw[frame], uv)
+    out_dir: Path = None
+    frame_paths: list = None
+    truth_path: Path = None
+    elapsed_s: float = 0.0
 
 
 def _setup(num_frames: int, seed: int, camera: Optional[CameraModel], fps: float, t0_s: float,
@@ -660,8 +649,8 @@ def render_scene_frames(num_frames: int = 30, seed: int = 0, camera: Optional[Ca
     camera, renderer, trajectory, times_s, R, p = _setup(num_frames, seed, camera, fps, t0_s, scene,
                                                          trajectory, supersampling)
     images = np.stack(list(_frames(renderer, R, p, seed, noise_sigma)))
-    return RenderedFrames(images, times_s, R, p, camera, renderer, trajectory, float(fps), int(seed),
-                          float(noise_sigma))
+    return RenderedFrames(times_s, R, p, camera, renderer, trajectory, float(fps), int(seed), float(noise_sigma),
+                          images=images)
 
 
 def render_scene_sequence(out_dir: Union[str, Path], num_frames: int = 300, seed: int = 0,
@@ -705,8 +694,9 @@ def render_scene_sequence(out_dir: Union[str, Path], num_frames: int = 300, seed
     }
     truth_path = out_dir / "truth.json"
     truth_path.write_text(json.dumps(truth, indent=1))
-    return SceneSequence(out_dir, paths, times_s, R, p, camera, renderer, trajectory, float(fps), int(seed),
-                         float(noise_sigma), truth_path, time.perf_counter() - start)
+    return SceneSequence(times_s, R, p, camera, renderer, trajectory, float(fps), int(seed), float(noise_sigma),
+                         out_dir=out_dir, frame_paths=paths, truth_path=truth_path,
+                         elapsed_s=time.perf_counter() - start)
 
 
 def load_scene_truth(out_dir: Union[str, Path]) -> dict:
