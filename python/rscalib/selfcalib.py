@@ -32,6 +32,11 @@ class FrontEndOptions:
     min_separation_px: float = 20.0   # new corners away from predicted features
     max_search_half_px: float = 60.0  # cap the ellipse's bounding box (first frames span f widely)
     corner_quality: float = 0.01
+    # "affine": refine each NCC peak by ECC alignment of the patch under an affine warp (the stored
+    # patch is never re-cut, so scale/rotation changes as the camera moves would otherwise bias the
+    # match); "parabola": parabola through the NCC peak only.
+    subpixel: str = "affine"
+    max_refine_shift_px: float = 1.5
 
 
 @dataclass
@@ -104,6 +109,28 @@ def _subpixel_peak(scores: np.ndarray, x: int, y: int) -> tuple[float, float]:
     return float(np.clip(dx, -0.5, 0.5)), float(np.clip(dy, -0.5, 0.5))
 
 
+def _refine_affine(image: np.ndarray, patch: np.ndarray, u: float, v: float, margin: int = 3
+                   ) -> Optional[tuple[float, float]]:
+    """Enhanced-correlation (ECC) alignment of ``patch`` near (u, v) under an affine warp; the
+    refined position of the patch centre, or None when ECC fails or the warp is implausible."""
+    h = patch.shape[0] // 2
+    size = 2 * (h + margin) + 1
+    x0, y0 = int(round(u)) - h - margin, int(round(v)) - h - margin
+    if x0 < 0 or y0 < 0 or x0 + size > image.shape[1] or y0 + size > image.shape[0]:
+        return None
+    region = image[y0:y0 + size, x0:x0 + size].astype(np.float32)
+    warp = np.array([[1.0, 0.0, u - h - x0], [0.0, 1.0, v - h - y0]], np.float32)
+    try:
+        _, warp = cv2.findTransformECC(patch.astype(np.float32), region, warp, cv2.MOTION_AFFINE,
+                                       (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-4), None, 1)
+    except cv2.error:   # ECC did not converge (e.g. a patch turned flat)
+        return None
+    if not 0.6 < abs(float(np.linalg.det(warp[:, :2]))) < 1.7:
+        return None
+    centre = warp.astype(np.float64) @ np.array([h, h, 1.0])
+    return float(centre[0] + x0), float(centre[1] + y0)
+
+
 def active_search(image: np.ndarray, patches: dict, ids: np.ndarray, uv_pred: np.ndarray, cov: np.ndarray,
                   options: FrontEndOptions) -> tuple[np.ndarray, np.ndarray]:
     """NCC match of each feature's patch inside its 99 % ellipse: (uv (n, 2), found (n,))."""
@@ -142,6 +169,11 @@ def active_search(image: np.ndarray, patches: dict, ids: np.ndarray, uv_pred: np
         sx, sy = _subpixel_peak(scores, x, y)
         uv[i] = (x + x_lo + half + sx, y + y_lo + half + sy)
         found[i] = True
+        if options.subpixel == "affine":
+            refined = _refine_affine(image, patch, uv[i, 0], uv[i, 1])
+            if refined is not None and math.hypot(refined[0] - uv[i, 0], refined[1] - uv[i, 1]) \
+                    <= options.max_refine_shift_px:
+                uv[i] = refined
     return uv, found
 
 
@@ -170,6 +202,8 @@ def self_calibrate(frames: Iterable, image_size: tuple[int, int], *,
     progress(frame_index, bank) is called after every frame."""
     width, height = int(image_size[0]), int(image_size[1])
     fe = front_end or FrontEndOptions()
+    if fe.subpixel not in ("affine", "parabola"):
+        raise InputError(f"front_end.subpixel must be 'affine' or 'parabola', not {fe.subpixel!r}")
     scale = width / 320.0
     fe = FrontEndOptions(**{**fe.__dict__,
                             "patch_half_px": max(3, int(round(fe.patch_half_px * max(1.0, scale ** 0.5)))),

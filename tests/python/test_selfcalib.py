@@ -41,6 +41,27 @@ def test_active_search_finds_a_shifted_patch_inside_its_ellipse_only():
     assert np.all(np.linalg.norm(uv[found] - (uv0[found] + shift), axis=1) > 1.0)
 
 
+def test_affine_refinement_locates_a_scaled_rotated_patch_better_than_the_parabola():
+    # The stored patch is cut once; later views see it magnified and rotated about the feature.
+    image = textured(3, shape=(240, 320))
+    u0, v0 = 161, 119
+    errors = {"affine": [], "parabola": []}
+    for angle_deg, scale in [(6.0, 1.12), (-5.0, 0.9), (8.0, 1.15), (3.0, 1.08)]:
+        warp = cv2.getRotationMatrix2D((float(u0), float(v0)), angle_deg, scale)
+        warp[:, 2] += [2.4, -1.7]                     # and translated
+        view = cv2.warpAffine(image, warp, (320, 240), flags=cv2.INTER_CUBIC)
+        patches = {0: image[v0 - 5:v0 + 6, u0 - 5:u0 + 6].copy()}
+        truth = warp @ np.array([u0, v0, 1.0])        # the patch centre in the view (oracle: the warp)
+        cov = np.eye(2)[None] * 16.0
+        for mode in errors:
+            uv, found = active_search(view, patches, np.array([0]), truth[None] + [1.0, -1.0], cov,
+                                      FrontEndOptions(subpixel=mode))
+            assert found[0], mode
+            errors[mode].append(np.linalg.norm(uv[0] - truth))
+    assert max(errors["affine"]) < 0.15
+    assert np.mean(errors["affine"]) < 0.5 * np.mean(errors["parabola"])
+
+
 def test_civera_to_opencv_reproduces_the_model_and_reports_its_error():
     camera = rscalib.CameraModel("civera-radial", PAPER, 320, 240, pixel_size_mm=(0.0112, 0.0112))
     opencv, max_error = civera_to_opencv(camera)
@@ -83,7 +104,20 @@ def test_selfcalib_cli_recovers_the_focal_length(room_sequence, tmp_path):
     assert camera.params[0] == pytest.approx(result["f"])
 
 
-@pytest.mark.parametrize("case", ["missing source", "bad pixel size", "empty folder"])
+def test_selfcalib_single_ekf_option_runs_one_gaussian_from_f0(room_sequence, tmp_path):
+    proc = subprocess.run([*CLI, "selfcalib", room_sequence, "--out", tmp_path / "one", "--quiet", "--bank", "single",
+                           "--f0", "260", "--f-sigma", "60", "--max-frames", "20"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads((tmp_path / "one" / "result.json").read_text())
+    assert result["bank"] == "single"
+    assert result["gaussians_initial"] == 1 and result["gaussians_left"] == 1
+    assert result["history"]["mean"][0][0] != pytest.approx(result["f"])  # it moved from f0 ...
+    lo, hi = result["history"]["bounds_99"][0][0]
+    assert lo < 260 - 2.5 * 60 and hi > 260 + 2.5 * 60                  # ... which started as 260 +- 60
+
+
+@pytest.mark.parametrize("case", ["missing source", "bad pixel size", "empty folder", "f0 without single"])
 def test_selfcalib_bad_input_exits_2(tmp_path, case):
     source = tmp_path / "frames"
     source.mkdir()
@@ -93,6 +127,9 @@ def test_selfcalib_bad_input_exits_2(tmp_path, case):
     elif case == "bad pixel size":
         cv2.imwrite(str(source / "a.png"), textured(2))
         extra = ["--pixel-size-mm", "-1"]
+    elif case == "f0 without single":
+        cv2.imwrite(str(source / "a.png"), textured(2))
+        extra = ["--f0", "200"]
     proc = subprocess.run([*CLI, "selfcalib", source, "--out", tmp_path / "o", "--quiet", *extra],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2, (case, proc.stderr)

@@ -28,8 +28,37 @@ def add_parser(sub) -> None:
     p.add_argument("--beta", type=float, default=None, help="SPRT type II error (default 0.1)")
     p.add_argument("--f-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
                    help="focal-length range of the initial bank in px (default: the paper's, scaled)")
+    p.add_argument("--bank", choices=["sog", "single"], default="sog",
+                   help="sog: the paper's grid of Gaussians (default); single: one EKF (the baseline the paper "
+                        "compares against), started at --f0 with --f-sigma")
+    p.add_argument("--f0", type=float, default=None,
+                   help="with --bank single: initial focal length in px (default: the middle of the f range)")
+    p.add_argument("--f-sigma", type=float, default=None,
+                   help="with --bank single: initial sigma of f in px (default: a quarter of the f range)")
+    p.add_argument("--subpixel", choices=["affine", "parabola"], default="affine",
+                   help="match refinement: ECC affine alignment of the patch (default) or a parabola through "
+                        "the NCC peak")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
+
+
+def bank_grid(args: argparse.Namespace, width: int, height: int) -> dict:
+    """initial_bank keyword arguments for the --bank/--f-range/--f0/--f-sigma options."""
+    from ..sog_bank import initial_bank
+
+    grid = {"f_range": tuple(args.f_range)} if args.f_range else {}
+    if args.bank == "sog":
+        if args.f0 is not None or args.f_sigma is not None:
+            raise InputError("--f0 and --f-sigma go with --bank single")
+        return grid
+    default = initial_bank(width, height, args.pixel_size_mm, **grid)
+    f_lo, f_hi = default.means[:, 0].min(), default.means[:, 0].max()
+    f0 = 0.5 * (f_lo + f_hi) if args.f0 is None else args.f0
+    f_sigma = 0.25 * (f_hi - f_lo) if args.f_sigma is None else args.f_sigma
+    if not f0 > 0 or not f_sigma > 0:
+        raise InputError("--f0 and --f-sigma must be positive")
+    # One Gaussian per parameter; _grid gives a count-1 grid the range's middle and sigma range/4.
+    return {**grid, "f_range": (f0 - 2 * f_sigma, f0 + 2 * f_sigma), "f_count": 1, "k1_count": 1, "k2_count": 1}
 
 
 def plot_history(result, path: Path) -> None:
@@ -62,7 +91,7 @@ def plot_history(result, path: Path) -> None:
 def run(args: argparse.Namespace) -> int:
     from .. import _core
     from ..camera_io import write_opencv_yaml
-    from ..selfcalib import civera_to_opencv, self_calibrate
+    from ..selfcalib import FrontEndOptions, civera_to_opencv, self_calibrate
     from ..video import open_source
 
     if not Path(args.source).exists():
@@ -91,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         options.sprt_alpha = args.alpha
     if args.beta is not None:
         options.sprt_beta = args.beta
-    grid = {"f_range": tuple(args.f_range)} if args.f_range else None
+    grid = bank_grid(args, width, height)
     total = args.max_frames or source.frame_count_estimate
     bar = None
     if not args.quiet:
@@ -110,13 +139,15 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         result = self_calibrate(frames(), (width, height), pixel_size_mm=args.pixel_size_mm, options=options,
-                                grid=grid, max_frames=args.max_frames, progress=progress)
+                                grid=grid, front_end=FrontEndOptions(subpixel=args.subpixel), max_frames=args.max_frames, progress=progress)
     finally:
         if bar is not None:
             bar.stop()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     summary = result.summary_dict()
+    summary["bank"] = args.bank
+    summary["subpixel"] = args.subpixel
     opencv, max_error = civera_to_opencv(result.camera())
     write_opencv_yaml(opencv, out / "camera.yaml")
     summary["opencv_camera"] = {"file": "camera.yaml", "model": "pinhole-radtan (k1, k2, k3 fitted; p1 = p2 = 0)",
