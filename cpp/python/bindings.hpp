@@ -11,6 +11,7 @@ using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecas
 void BindSpline(py::module_& m);
 void BindCamera(py::module_& m);
 void BindRs(py::module_& m);
+void BindRsLinear(py::module_& m);
 void BindSog(py::module_& m);
 
 // Rows of a (count, width) or (width,) array; throws InputError on other shapes.

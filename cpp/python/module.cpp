@@ -25,5 +25,6 @@ PYBIND11_MODULE(_core, m) {
   rscalib::python::BindSpline(m);
   rscalib::python::BindCamera(m);
   rscalib::python::BindRs(m);
+  rscalib::python::BindRsLinear(m);
   rscalib::python::BindSog(m);
 }

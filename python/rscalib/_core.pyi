@@ -6,7 +6,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BSpline', 'CameraModel', 'InputError', 'RsSolveSummary', 'RsSolverOptions', 'SogBank', 'SogOptions', 'SogUpdateReport', 'error_noise_map', 'evaluate_line_delay', 'evaluate_rs_cost', 'fit_bspline', 'poses_at', 'rotation_matrix_to_vector', 'rotation_vector_to_matrix', 'solve_line_delay', 'standardisation_weight', 'unwrap_rotation_vectors']
+__all__: list[str] = ['BSpline', 'CameraModel', 'InputError', 'LinearInterpOptions', 'LinearInterpSummary', 'RsSolveSummary', 'RsSolverOptions', 'SogBank', 'SogOptions', 'SogUpdateReport', 'error_noise_map', 'evaluate_line_delay', 'evaluate_rs_cost', 'fit_bspline', 'linear_interp_pose_state', 'poses_at', 'rotation_matrix_to_vector', 'rotation_vector_to_matrix', 'solve_line_delay', 'solve_line_delay_linear', 'standardisation_weight', 'unwrap_rotation_vectors']
 class InputError(ValueError):
     pass
 class BSpline:
@@ -279,6 +279,162 @@ class RsSolveSummary:
         ...
     @property
     def segment_count(self) -> list[int]:
+        ...
+    @property
+    def solve_time_s(self) -> float:
+        ...
+    @property
+    def standardised_sq(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
+    def unprojectable(self) -> int:
+        ...
+class LinearInterpOptions:
+    """
+    Options of the linear-interpolation line-delay solve.
+    """
+    compute_covariance: bool
+    estimate_line_delay: bool
+    verbose: bool
+    def __init__(self) -> None:
+        ...
+    @property
+    def function_tolerance(self) -> float:
+        ...
+    @function_tolerance.setter
+    def function_tolerance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def gradient_tolerance(self) -> float:
+        ...
+    @gradient_tolerance.setter
+    def gradient_tolerance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def max_frame_interval_s(self) -> float:
+        """
+        frames further apart are not interpolated between; 0: 1.5 x median
+        """
+    @max_frame_interval_s.setter
+    def max_frame_interval_s(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def max_iterations(self) -> int:
+        ...
+    @max_iterations.setter
+    def max_iterations(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def max_outer_iterations(self) -> int:
+        ...
+    @max_outer_iterations.setter
+    def max_outer_iterations(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def max_rs_gain(self) -> float:
+        ...
+    @max_rs_gain.setter
+    def max_rs_gain(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def num_threads(self) -> int:
+        ...
+    @num_threads.setter
+    def num_threads(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def parameter_tolerance(self) -> float:
+        ...
+    @parameter_tolerance.setter
+    def parameter_tolerance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def pixel_sigma(self) -> float:
+        """
+        R = sigma^2 I, px
+        """
+    @pixel_sigma.setter
+    def pixel_sigma(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def robust_loss(self) -> str:
+        """
+        none | huber | cauchy
+        """
+    @robust_loss.setter
+    def robust_loss(self, arg0: str) -> None:
+        ...
+    @property
+    def robust_loss_scale(self) -> float:
+        ...
+    @robust_loss_scale.setter
+    def robust_loss_scale(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def standardise_errors(self) -> bool:
+        """
+        A R A^T weights (default False: plain error / sigma)
+        """
+    @standardise_errors.setter
+    def standardise_errors(self, arg0: bool) -> None:
+        ...
+class LinearInterpSummary:
+    @property
+    def clamped_weights(self) -> int:
+        ...
+    @property
+    def converged(self) -> bool:
+        ...
+    @property
+    def covariance_ok(self) -> bool:
+        ...
+    @property
+    def covariance_time_s(self) -> float:
+        ...
+    @property
+    def extrapolated(self) -> int:
+        ...
+    @property
+    def isolated(self) -> int:
+        ...
+    @property
+    def iterations(self) -> int:
+        ...
+    @property
+    def line_delay_s(self) -> float:
+        ...
+    @property
+    def line_delay_std_s(self) -> float:
+        ...
+    @property
+    def max_frame_interval_s(self) -> float:
+        ...
+    @property
+    def measurement_cost(self) -> float:
+        ...
+    @property
+    def message(self) -> str:
+        ...
+    @property
+    def num_chains(self) -> int:
+        ...
+    @property
+    def num_error_terms(self) -> int:
+        ...
+    @property
+    def observation_time_s(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
+    def outer_iterations(self) -> int:
+        ...
+    @property
+    def pair_first(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"]:
+        ...
+    @property
+    def residual_px(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]"]:
+        ...
+    @property
+    def rms_px(self) -> float:
         ...
     @property
     def solve_time_s(self) -> float:
@@ -689,6 +845,10 @@ def fit_bspline(knots: collections.abc.Sequence[typing.SupportsFloat | typing.Su
     min sum_s w_s |x(t_s) - y_s|^2 + sum_d lambda_d * integral (x_d'')^2 dt.
     acceleration_weight: [] (none), [lambda] or one lambda per dimension.
     """
+def linear_interp_pose_state(pose_a: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[6, 1]"], pose_b: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[6, 1]"], s: typing.SupportsFloat | typing.SupportsIndex) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[6, 1]"]:
+    """
+    T_cw [p; phi] at parameter s between poses a and b: centre linear, rotation SLERP.
+    """
 def poses_at(pose_spline: BSpline, times: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64]]:
     """
     T_cw(t) of a 6-D pose spline [p; phi] at many times: (R (m, 3, 3), p (m, 3)), x_c = R x_w + p.
@@ -700,6 +860,10 @@ def rotation_vector_to_matrix(rotation_vector: typing.Annotated[numpy.typing.Arr
 def solve_line_delay(frame_time_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], uv: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], point_w: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 3]"], camera: CameraModel, trajectory: BSpline, line_delay_s: typing.SupportsFloat | typing.SupportsIndex, options: RsSolverOptions) -> RsSolveSummary:
     """
     Refines trajectory (in place) and the line delay; returns an RsSolveSummary.
+    """
+def solve_line_delay_linear(frame_index: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], uv: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], point_w: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 3]"], frame_time_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], camera: CameraModel, frame_poses: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 6]"], line_delay_s: typing.SupportsFloat | typing.SupportsIndex, options: LinearInterpOptions) -> tuple[LinearInterpSummary, typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 6]"]]:
+    """
+    Per-frame poses (F, 6) [p; phi] T_cw at the frames' row-0 times, and the line delay, with linear/SLERP interpolation between consecutive frames. Returns (summary, poses).
     """
 def standardisation_weight(line_delay_s: typing.SupportsFloat | typing.SupportsIndex, image_velocity_px_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[2, 1]"], pixel_sigma: typing.SupportsFloat | typing.SupportsIndex, max_rs_gain: typing.SupportsFloat | typing.SupportsIndex = 0.8) -> tuple[typing.Annotated[numpy.typing.NDArray[numpy.float64], "[2, 2]"], bool]:
     """
