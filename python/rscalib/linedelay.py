@@ -45,7 +45,7 @@ class RoundRecord:
     normalised_cost: float
     rms_px: float
     segments_split: int
-    segments_at_cap: int              # over their expected cost but already min_segment_s long
+    segments_at_cap: int              # over their expected cost but too short to halve (min_segment_s)
     iterations: int
     solve_time_s: float
 
@@ -206,7 +206,8 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
     rows: image rows read out (default: image height). pixel_sigma: detection noise in px
     (default: estimated from the data, see rscalib.noise). num_segments fixes uniform knots
     (with adaptive_knots=False, for experiments). min_segment_s: shortest segment the
-    adaptation may create (default: one frame interval); initial_segments_per_s: uniform
+    adaptation may create (default: half a frame interval, so segments can reach one frame
+    interval from the initial ~4 frames); initial_segments_per_s: uniform
     knots to start from (default fps/4, deliberately too few). split_margin_sigmas:
     a segment splits when J_j >= 2 N_j + margin * sqrt(4 N_j); 0 is the paper's rule, which
     also splits ~1/3 of well-modelled segments by chance (docs/formulation.md §7).
@@ -243,7 +244,9 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     d = float(nominal_delay_s if line_delay_s is None else line_delay_s)
     initial_d = d
     if min_segment_s is None:
-        min_segment_s = 1.0 / fps
+        # Halving stops below 2 * min_segment_s; the initial segments (~4 frames) then end at ~1 frame.
+        # A 2-frame floor could not follow hand shake (0.5-8 Hz): J/2N ~ 75 and d off by several %.
+        min_segment_s = 0.5 / fps
 
     # Initial guess: GS PnP per frame; frames without a pose are left out.
     poses = per_frame_pnp(observations, camera)
@@ -333,6 +336,10 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
             warnings.append("the line delay is not determined by this data (too little or the wrong kind of "
                             f"motion): sigma_d = {std * 1e6 if math.isfinite(std) else float('inf'):.3g} us; "
                             "move the camera faster, mostly rotating about its x and y axes")
+    if cost > 1.5 and adaptive_knots and history[-1].segments_at_cap > 0:
+        warnings.append(f"{history[-1].segments_at_cap} trajectory segments are at the shortest allowed length "
+                        f"({min_segment_s * 1e3:.1f} ms) and still fit badly: the motion is faster than the spline can "
+                        "follow, so sigma_d is optimistic (lower min_segment_s, or move more smoothly)")
     if cost > 1.5:
         hint = ("outliers are down-weighted by the robust loss" if robust_loss != "none"
                 else "or there are outliers (try robust_loss='huber')")
