@@ -15,6 +15,8 @@ from ._core import (
     unwrap_rotation_vectors,
 )
 from .errors import InputError
+from .flicker import FlickerResult, estimate_line_delay_flicker
+from .linear_interp import LinearInterpResult, calibrate_line_delay_linear
 from .linedelay import LineDelayResult, calibrate_line_delay, localize
 from .observations import Observations
 from .selfcalib import SelfCalibResult, self_calibrate
@@ -27,11 +29,15 @@ except PackageNotFoundError:  # running from a source tree without metadata
 __all__ = [
     "BSpline",
     "CameraModel",
+    "FlickerResult",
     "InputError",
+    "LinearInterpResult",
     "LineDelayResult",
     "Observations",
     "SelfCalibResult",
     "calibrate_line_delay",
+    "calibrate_line_delay_linear",
+    "estimate_line_delay_flicker",
     "localize",
     "fit_bspline",
     "poses_at",

@@ -859,6 +859,7 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
                  supersample: int = 3, exposure_samples: Optional[int] = None, video: bool = True,
                  frames_dir: Union[None, bool, str, Path] = None, codec: str = "auto",
                  intensity_modulation: Optional[Callable[[np.ndarray], np.ndarray]] = None,
+                 flicker_hz: Optional[float] = None, flicker_depth: float = 0.3, flicker_phase_rad: float = 0.0,
                  dense_rate_hz: float = 200.0, workers: Optional[int] = None,
                  progress: bool = True) -> RenderedVideo:
     """Render a rolling-shutter video of a target with its ground truth.
@@ -876,6 +877,8 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
         seed: the default trajectory and the noise. motion: amplitude of the default hand-held
         trajectory. trajectory: anything with a vectorised ``pose_cw(t)``, overriding the default.
         intensity_modulation: f(t) -> gain on the scene radiance (flicker hook).
+        flicker_hz, flicker_depth, flicker_phase_rad: a light flickering as gain
+        1 + depth·sin(2π f t + phase) (instead of intensity_modulation); recorded in truth.json.
         supersample, exposure_samples, workers: see :class:`RollingShutterRenderer`.
     """
     for name, value in (("fps", fps), ("duration", duration_s)):
@@ -891,6 +894,24 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
         raise InputError(f"noise must be >= 0 grey levels (got {noise})")
     if not (math.isfinite(motion) and motion >= 0):
         raise InputError(f"motion amplitude must be >= 0 (got {motion})")
+    flicker = None
+    if flicker_hz is not None:
+        if intensity_modulation is not None:
+            raise InputError("give a flicker frequency or an intensity modulation, not both")
+        if not (math.isfinite(flicker_hz) and flicker_hz > 0):
+            raise InputError(f"flicker frequency must be positive (got {flicker_hz})")
+        if not (math.isfinite(flicker_depth) and 0 <= flicker_depth < 1):
+            raise InputError(f"flicker depth must be in [0, 1) (got {flicker_depth})")
+        if not math.isfinite(flicker_phase_rad):
+            raise InputError("flicker phase must be finite")
+        flicker = {"frequency_hz": float(flicker_hz), "depth": float(flicker_depth),
+                   "phase_rad": float(flicker_phase_rad),
+                   "gain": "1 + depth * sin(2 pi frequency_hz t + phase_rad), t = row time (s); "
+                           "radiance above full scale clips"}
+
+        def flicker_gain(t: np.ndarray) -> np.ndarray:
+            return 1.0 + flicker_depth * np.sin(2.0 * np.pi * flicker_hz * t + flicker_phase_rad)
+        intensity_modulation = flicker_gain
     if camera is None:
         camera = default_camera(_parse_size(size))
     if abs(line_delay_s) * camera.height > 1.0 / fps:
@@ -980,6 +1001,7 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
         "motion_amplitude": float(motion),
         "intensity_modulation": None if intensity_modulation is None else getattr(
             intensity_modulation, "__name__", "custom"),
+        "flicker": flicker,
         "video": None if video_path is None else {"file": video_path.name, "codec": used_codec,
                                                   "frame_timestamps": "frame i at i / fps"},
         "frames_dir": None if frames_dir is None else str(frames_dir),

@@ -53,6 +53,11 @@ def add_parser(sub) -> None:
     p.add_argument("--no-video", action="store_true", help="do not write the video file (use with --frames-dir)")
     p.add_argument("--codec", choices=["auto", "ffv1", "mjpg"], default="auto",
                    help="video codec: FFV1 (lossless), MJPG (lossy) or auto (FFV1, else MJPG)")
+    p.add_argument("--flicker-hz", type=float, default=None, metavar="HZ",
+                   help="light flickering at HZ (its intensity frequency: 100 for 50 Hz mains), for `rscalib flicker`")
+    p.add_argument("--flicker-depth", type=float, default=0.3, metavar="A",
+                   help="flicker modulation depth: gain 1 + A sin(2 pi HZ t + phase) (0.3)")
+    p.add_argument("--flicker-phase", type=float, default=0.0, metavar="RAD", help="flicker phase at t = 0, radians (0)")
     p.add_argument("--workers", type=int, default=None, metavar="N", help="rendering threads (default: up to 4)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=run)
@@ -74,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
                           noise=args.noise, seed=args.seed, camera=camera, motion=args.motion,
                           supersample=args.supersample, exposure_samples=args.exposure_samples,
                           video=not args.no_video, frames_dir=args.frames_dir, codec=args.codec,
-                          workers=args.workers, progress=not args.quiet)
+                          flicker_hz=args.flicker_hz, flicker_depth=args.flicker_depth,
+                          flicker_phase_rad=args.flicker_phase, workers=args.workers, progress=not args.quiet)
     if not args.quiet:
         c = result.camera
         written = [p.name for p in (result.video_path, result.truth_path, result.camera_path, result.target_path) if p]
@@ -82,7 +88,9 @@ def run(args: argparse.Namespace) -> int:
             written.append(f"{result.frames_dir.name}/ ({result.num_frames} PNG + timestamps.txt)")
         print(f"rscalib simulate: {result.num_frames} frames {c.width}x{c.height} at {result.fps:g} fps, "
               f"{result.target.kind}, line delay {result.line_delay_s * 1e6:.3f} us/row "
-              f"(readout {result.line_delay_s * c.height * 1e3:.3f} ms)")
+              f"(readout {result.line_delay_s * c.height * 1e3:.3f} ms)"
+              + (f", light flickering at {args.flicker_hz:g} Hz (depth {args.flicker_depth:g})"
+                 if args.flicker_hz is not None else ""))
         print(f"  rendered in {result.render_seconds:.1f} s ({result.frames_per_second_rendered:.1f} frames/s)"
               + (f", codec {result.codec}" if result.codec else ""))
         print(f"  wrote {', '.join(written)} to {result.out_dir}")
