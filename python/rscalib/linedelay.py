@@ -206,9 +206,8 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
     rows: image rows read out (default: image height). pixel_sigma: detection noise in px
     (default: estimated from the data, see rscalib.noise). num_segments fixes uniform knots
     (with adaptive_knots=False, for experiments). min_segment_s: shortest segment the
-    adaptation may create (default: half a frame interval, so segments can reach one frame
-    interval from the initial ~4 frames); initial_segments_per_s: uniform
-    knots to start from (default fps/4, deliberately too few). split_margin_sigmas:
+    adaptation may create (default: half a frame interval, at most 1/60 s); initial_segments_per_s: uniform
+    knots to start from (default fps/4 but at least 7.5, deliberately too few). split_margin_sigmas:
     a segment splits when J_j >= 2 N_j + margin * sqrt(4 N_j); 0 is the paper's rule, which
     also splits ~1/3 of well-modelled segments by chance (docs/formulation.md §7).
     progress: called after each round.
@@ -244,9 +243,10 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     d = float(nominal_delay_s if line_delay_s is None else line_delay_s)
     initial_d = d
     if min_segment_s is None:
-        # Halving stops below 2 * min_segment_s; the initial segments (~4 frames) then end at ~1 frame.
-        # A 2-frame floor could not follow hand shake (0.5-8 Hz): J/2N ~ 75 and d off by several %.
-        min_segment_s = 0.5 / fps
+        # Halving stops below 2 * min_segment_s, so segments can reach ~1 frame at 30 fps. A 2-frame
+        # floor could not follow hand shake (0.5-8 Hz): J/2N ~ 75, d several % off. The floor is about
+        # the motion's bandwidth, not the frame rate: at most 1/60 s, also for slow (e.g. 7 fps) cameras.
+        min_segment_s = min(0.5 / fps, 1.0 / 60.0)
 
     # Initial guess: GS PnP per frame; frames without a pose are left out.
     poses = per_frame_pnp(observations, camera)
@@ -274,7 +274,8 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     t_end = float(used.frame_times_s[-1] + 1.0 / fps)  # the last frame's readout
     duration = t_end - t_begin
     if initial_segments_per_s is None:
-        initial_segments_per_s = fps / 4.0  # one segment per 4 frames: too few for hand-held motion
+        # One segment per 4 frames (at least 7.5 per second): too few for hand-held motion on purpose.
+        initial_segments_per_s = max(fps / 4.0, 7.5)
     segments = int(num_segments) if num_segments else max(1, int(math.ceil(duration * initial_segments_per_s)))
     trajectory = initial_trajectory(used, used_poses, d, segments, t_begin, t_end)
 
