@@ -1,0 +1,276 @@
+"""Shared by the paper-reproduction experiments (benchmarks/exp_*.py, issue #6).
+
+Rendered videos with exact ground truth go through the same code paths as the CLI
+(`rscalib simulate` -> `rscalib linedelay` / `rscalib localize`):
+
+    render_video -> video.avi, truth.json, camera.yaml, target.yaml
+    read_camera(camera.yaml), load_target(target.yaml), detect_video(video.avi)   (= linedelay._detect)
+    calibrate_line_delay / localize
+
+Videos are cached under build/exp_videos/<config>/ (build/ is git-ignored); a video is re-rendered
+only when its render settings (params.json) differ. Detections are cached by detect_video itself
+($RSCALIB_CACHE_DIR if set, else build/exp_videos/_detections).
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import machine_info  # noqa: E402  (benchmarks/_common.py, unchanged)
+
+import rscalib  # noqa: E402
+from rscalib import _core  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+VIDEO_ROOT = REPO / "build" / "exp_videos"
+RESULTS = REPO / "benchmarks" / "results"
+FIGURES = REPO / "docs" / "figures"
+
+
+# -- bookkeeping ------------------------------------------------------------------------------------
+
+def git_commit() -> str:
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True,
+                              check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO,
+                               capture_output=True, text=True).stdout.strip()
+        return head + ("+dirty" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def parser(description: str, default_seeds: int, quick_seeds: int) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(description=description)
+    p.add_argument("--seeds", type=int, default=None, help=f"videos (seeds) per configuration ({default_seeds})")
+    p.add_argument("--quick", action="store_true", help=f"fewer seeds ({quick_seeds}) for a fast check")
+    p.set_defaults(_default_seeds=default_seeds, _quick_seeds=quick_seeds)
+    return p
+
+
+def seeds_from(args) -> int:
+    if args.seeds is not None:
+        return int(args.seeds)
+    return args._quick_seeds if args.quick else args._default_seeds
+
+
+def write_results(name: str, settings: dict, rows: list, table: str, timings: dict, **extra) -> Path:
+    path = RESULTS / f"{name}.json"
+    result = {"benchmark": name, "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+              "git_commit": git_commit(), "command": " ".join([".venv/bin/python"] + sys.argv),
+              "machine": machine_info(), "settings": settings, "timings_s": timings, **extra,
+              "results": rows, "table_markdown": table}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(_jsonable(result), indent=2) + "\n")
+    print(f"\nwritten {path.relative_to(REPO)}")
+    return path
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return None if not math.isfinite(float(x)) else float(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    return x
+
+
+def markdown_table(header: list[str], rows: list[list], align: Optional[str] = None) -> str:
+    align = align or ("l" + "r" * (len(header) - 1))
+    sep = ["---" if a == "l" else "---:" for a in align]
+    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(sep) + " |"]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def save_figure(fig, name: str, max_kb: int = 150) -> Path:
+    """PNG under docs/figures; lowers the dpi until the file is below max_kb."""
+    FIGURES.mkdir(parents=True, exist_ok=True)
+    path = FIGURES / f"{name}.png"
+    for dpi in (110, 95, 80, 65):
+        fig.savefig(path, dpi=dpi)
+        if path.stat().st_size < max_kb * 1024:
+            break
+    print(f"figure {path.relative_to(REPO)} ({path.stat().st_size // 1024} kB)")
+    return path
+
+
+# -- cameras ----------------------------------------------------------------------------------------
+
+def bluefox_camera() -> rscalib.CameraModel:
+    """A wide-VGA mvBlueFOX-MLC-like camera: 752x480, 6.0 um pixels (Aptina MT9V034), 3.5 mm
+    S-mount lens -> f = 3.5 / 0.006 = 583.3 px (HFOV 65 deg), mild barrel distortion as the
+    project's default camera."""
+    f = 3.5e-3 / 6.0e-6
+    return rscalib.CameraModel("pinhole-radtan", [f, f, 375.5, 239.5, -0.1, 0.05, 0.0, 0.0, 0.0], 752, 480)
+
+
+# -- trajectories -----------------------------------------------------------------------------------
+
+def calm_then_wild_trajectory(camera, target_name: str, duration_s: float, seed: int):
+    """The default hand-held trajectory (render.default_trajectory) with simulate.calm_then_wild's
+    amplitude profile: 0.15 of the default amplitude in the first half, 1.0 in the second."""
+    from rscalib.render import RenderTarget
+    from rscalib.simulate import HandheldTrajectory, calm_then_wild, standoff_distance_m
+
+    target = RenderTarget.named(target_name)
+    return HandheldTrajectory(duration_s=duration_s, seed=seed, amplitude=1.0,
+                              amplitude_profile=calm_then_wild(duration_s),
+                              target_center_m=target.center_m(),
+                              distance_m=standoff_distance_m(camera, target.points()))
+
+
+# -- videos -----------------------------------------------------------------------------------------
+
+def get_video(config: str, *, line_delay_s: float, fps: float, duration_s: float, seed: int,
+              camera: Optional[rscalib.CameraModel] = None, size=(640, 480), target: str = "checkerboard",
+              noise: float = 2.0, supersample: int = 2, motion: float = 1.0, trajectory_kind: str = "handheld",
+              workers: Optional[int] = None) -> tuple[Path, float]:
+    """Render (or reuse) build/exp_videos/<config>/; returns (folder, render seconds, 0 if cached)."""
+    from rscalib.render import default_camera, render_video
+
+    if camera is None:
+        camera = default_camera(size)
+    params = {"line_delay_s": line_delay_s, "fps": fps, "duration_s": duration_s, "seed": seed,
+              "camera": {"model": camera.model, "params": [float(v) for v in camera.params],
+                         "width": camera.width, "height": camera.height},
+              "target": target, "noise": noise, "supersample": supersample, "motion": motion,
+              "trajectory_kind": trajectory_kind}
+    folder = VIDEO_ROOT / config
+    marker = folder / "params.json"
+    if marker.is_file() and (folder / "video.avi").is_file():
+        if json.loads(marker.read_text()) == json.loads(json.dumps(params)):
+            return folder, 0.0
+    tmp = VIDEO_ROOT / f".{config}.tmp{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    trajectory = None
+    if trajectory_kind == "calm_then_wild":
+        trajectory = calm_then_wild_trajectory(camera, target, duration_s, seed)
+    elif trajectory_kind != "handheld":
+        raise ValueError(trajectory_kind)
+    started = time.perf_counter()
+    render_video(tmp, line_delay_s=line_delay_s, fps=fps, target=target, duration_s=duration_s, noise=noise,
+                 seed=seed, camera=camera, motion=motion, supersample=supersample, trajectory=trajectory,
+                 workers=workers, progress=False)
+    seconds = time.perf_counter() - started
+    (tmp / "params.json").write_text(json.dumps(params, indent=1))
+    shutil.rmtree(folder, ignore_errors=True)
+    tmp.rename(folder)
+    print(f"  rendered {config} in {seconds:.1f} s", flush=True)
+    return folder, seconds
+
+
+def truth_trajectory(folder: Path):
+    """The analytic trajectory a video was rendered with."""
+    from rscalib.render import load_truth, trajectory_from_truth
+
+    params = json.loads((folder / "params.json").read_text())
+    if params["trajectory_kind"] == "calm_then_wild":
+        c = params["camera"]
+        camera = rscalib.CameraModel(c["model"], c["params"], c["width"], c["height"])
+        return calm_then_wild_trajectory(camera, params["target"], params["duration_s"], params["seed"])
+    return trajectory_from_truth(load_truth(folder))
+
+
+def detect(folder: Path, workers: Optional[int] = None):
+    """What `rscalib linedelay` does before solving (commands/linedelay.py _detect): camera and target
+    from the files written next to the video, detect_video with its cache."""
+    from rscalib.camera_io import read_camera
+    from rscalib.detect import detect_video
+    from rscalib.targets import load_target
+
+    camera_file = read_camera(folder / "camera.yaml")
+    target = load_target(folder / "target.yaml")
+    cache_dir = None if os.environ.get("RSCALIB_CACHE_DIR") else VIDEO_ROOT / "_detections"
+    detection = detect_video(folder / "video.avi", target, workers=workers, cache=True, cache_dir=cache_dir,
+                             progress=False)
+    if detection.observations.num_observations == 0:
+        raise RuntimeError(f"{folder}: target not detected")
+    return detection, camera_file.camera
+
+
+# -- errors against the truth -----------------------------------------------------------------------
+
+def _centres(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    return -np.einsum("nji,nj->ni", R, p)
+
+
+def _angles(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
+    """Angle (rad) of Ra Rbᵀ."""
+    c = (np.einsum("nij,nij->n", Ra, Rb) - 1.0) / 2.0
+    return np.arccos(np.clip(c, -1.0, 1.0))
+
+
+def pose_errors(R_est, p_est, R_true, p_true) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-centre distance (m) and rotation angle (rad) per pose."""
+    return (np.linalg.norm(_centres(R_est, p_est) - _centres(R_true, p_true), axis=1), _angles(R_est, R_true))
+
+
+def trajectory_errors(spline, truth_traj, times_s: np.ndarray) -> dict:
+    """Mean / RMS camera-centre error (mm) and orientation error (deg) of a spline vs the truth."""
+    times_s = np.clip(times_s, spline.t_begin, spline.t_end)
+    R_e, p_e = _core.poses_at(spline, times_s)
+    R_t, p_t = truth_traj.pose_cw(times_s)
+    dp, dr = pose_errors(np.asarray(R_e), np.asarray(p_e), R_t, p_t)
+    return {"position_mean_mm": 1e3 * float(np.mean(dp)), "position_rms_mm": 1e3 * float(np.sqrt(np.mean(dp ** 2))),
+            "orientation_mean_deg": float(np.degrees(np.mean(dr))),
+            "orientation_rms_deg": float(np.degrees(np.sqrt(np.mean(dr ** 2))))}
+
+
+def observed_times(result, per_frame: int = 9) -> np.ndarray:
+    """Times covered by observations: per used frame, `per_frame` times across its readout."""
+    obs = result.used_observations
+    frac = np.linspace(0.0, 1.0, per_frame)
+    return (obs.frame_times_s[:, None] + frac[None, :] * result.readout_time_s).ravel()
+
+
+def summary_row(result, truth_d: float) -> dict:
+    return {"d_true_s": truth_d, "d_est_s": result.line_delay_s, "std_s": result.line_delay_std_s,
+            "rel_err": (result.line_delay_s - truth_d) / truth_d,
+            "within_3sigma": bool(abs(result.line_delay_s - truth_d) <= 3 * result.line_delay_std_s),
+            "normalised_cost": result.normalised_cost, "pixel_sigma": result.pixel_sigma,
+            "rms_px": result.rms_px, "segments": result.num_segments, "frames_used": result.frames_used,
+            "observations": result.observations, "solve_time_s": result.solve_time_s,
+            "determined": result.determined, "warnings": list(result.warnings)}
+
+
+class Timer:
+    def __init__(self) -> None:
+        self.t = {}
+
+    def add(self, key: str, seconds: float) -> None:
+        self.t[key] = self.t.get(key, 0.0) + float(seconds)
+
+
+def detection_audit(folder: Path, detection, threshold_px: float = 2.0) -> dict:
+    """Detected points vs the exact RS projections in truth.json: median error and the gross
+    misdetections (points farther than threshold_px, and the frames holding them)."""
+    from rscalib.render import _uv_array, load_truth
+
+    truth = load_truth(folder)
+    uv_true = _uv_array(truth["projections"]["uv_rs"])
+    obs = detection.observations
+    frames = np.asarray(detection.frame_numbers)[obs.frame_index]
+    err = np.linalg.norm(obs.uv - uv_true[frames, obs.point_id], axis=1)
+    bad = ~(err <= threshold_px)
+    return {"median_detection_error_px": float(np.nanmedian(err)), "gross_points": int(bad.sum()),
+            "gross_frames": sorted(int(f) for f in np.unique(frames[bad]))}
