@@ -6,7 +6,9 @@ folder through a pool of worker processes and returns the accepted detections as
 
 - checkerboard: cv2.findChessboardCorners (FAST_CHECK), else cv2.findChessboardCornersSB, on a
   copy downscaled to `max_search_side_px`; then cv2.cornerSubPix at full resolution. Full
-  boards only: without markers a partial checkerboard has no ids.
+  boards only: without markers a partial checkerboard has no ids. A found grid must be
+  surrounded by squares of alternating colour (drop reason "outer_ring"): when the board's edge
+  row leaves the image OpenCV can return a grid shifted by one row onto the squares' outer edge.
 - circlegrid: cv2.findCirclesGrid with a SimpleBlobDetector loosened for motion blur.
 - aprilgrid: cv2.aruco DICT_APRILTAG_36h11 with markerBorderBits = 2 (Kalibr's grids), then
   cornerSubPix on the tag corners (Kalibr's X-junctions with the small corner squares).
@@ -47,8 +49,8 @@ from .video import FrameSource, open_source
 # Bump when a change to the detectors or checks changes their output: it invalidates caches.
 DETECTOR_VERSION = "1"
 
-DROP_REASONS = ("no_target", "wrong_count", "blur", "outlier_geometry", "bad_timestamp", "unreadable",
-                "image_size", "detector_error")
+DROP_REASONS = ("no_target", "wrong_count", "blur", "outlier_geometry", "outer_ring", "bad_timestamp",
+                "unreadable", "image_size", "detector_error")
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,7 @@ class DetectOptions:
     min_points: int = 8                 # partial views (aprilgrid, charuco) with fewer are dropped
     max_search_side_px: int = 1280      # checkerboards: search on a downscaled copy above this
     subpix_window_px: Optional[int] = None  # cornerSubPix half-window; None: from the grid step
+    check_outer_ring: bool = True       # checkerboards: the squares around the found grid must alternate
 
     def fingerprint(self) -> str:
         return json.dumps(asdict(self), sort_keys=True)
@@ -152,6 +155,8 @@ class Detector:
         window = self.options.subpix_window_px or _grid_window(uv, rows, cols)
         uv = _corner_subpix(gray, uv, window)
         uv = self._canonical(gray, uv)
+        if self.options.check_outer_ring and not _outer_ring_alternates(gray, uv, rows, cols):
+            raise _Rejected("outer_ring")
         return np.arange(rows * cols), uv
 
     def _detect_circlegrid(self, gray: np.ndarray):
@@ -330,6 +335,51 @@ def _mean_intensity(gray: np.ndarray, quad: np.ndarray) -> float:
         x, y = np.clip(np.round(centre).astype(int), 0, [gray.shape[1] - 1, gray.shape[0] - 1])
         return float(gray[y, x])
     return float(cv2.mean(gray, mask)[0])
+
+
+def _outer_ring_alternates(gray: np.ndarray, uv: np.ndarray, rows: int, cols: int,
+                           max_wrong_fraction: float = 0.25) -> bool:
+    """Whether the cells just outside a found rows x cols inner-corner grid are squares of the
+    opposite colour to their inner neighbours, as on a real board (which has a ring of squares
+    around its inner corners). When the board's edge row leaves the image OpenCV can return a
+    grid shifted by one row whose last "corners" lie on the squares' outer edge; beyond those is
+    plain paper, so about half of that side's cells have the wrong colour. Sides whose ring cells
+    are not inside the image are not tested."""
+    grid = uv.reshape(rows, cols, 2)
+    height, width = gray.shape[:2]
+    inner = np.array([_mean_intensity(gray, np.array([grid[r, c], grid[r, c + 1], grid[r + 1, c + 1], grid[r + 1, c]]))
+                      for r in range(rows - 1) for c in range(cols - 1)])
+    if inner.size < 4:
+        return True
+    ordered = np.sort(inner)
+    dark, bright = ordered[:len(ordered) // 2].mean(), ordered[-(len(ordered) // 2):].mean()
+    if bright - dark < 20.0:
+        return True  # too little contrast to judge
+    mid = 0.5 * (dark + bright)
+    # (edge corners, the next row/column inwards) for the four sides
+    sides = [(grid[0], grid[1]), (grid[-1], grid[-2]), (grid[:, 0], grid[:, 1]), (grid[:, -1], grid[:, -2])]
+    for edge, inward in sides:
+        outside = 2.0 * edge - inward
+        tested = wrong = 0
+        for k in range(len(edge) - 1):
+            ring = np.array([outside[k], outside[k + 1], edge[k + 1], edge[k]])
+            if ring[:, 0].min() < 2 or ring[:, 1].min() < 2 or ring[:, 0].max() > width - 3 or ring[:, 1].max() > height - 3:
+                continue
+            # Sample the ring cell near the grid only: extrapolation overshoots under perspective,
+            # and outer squares may be printed right up to the sheet's edge.
+            a = edge[k] + 0.25 * (edge[k + 1] - edge[k])
+            b = edge[k] + 0.75 * (edge[k + 1] - edge[k])
+            oa = outside[k] + 0.25 * (outside[k + 1] - outside[k])
+            ob = outside[k] + 0.75 * (outside[k + 1] - outside[k])
+            ring = np.array([a + 0.1 * (oa - a), b + 0.1 * (ob - b), b + 0.6 * (ob - b), a + 0.6 * (oa - a)])
+            neighbour = np.array([edge[k], edge[k + 1], inward[k + 1], inward[k]])
+            a, b = _mean_intensity(gray, ring), _mean_intensity(gray, neighbour)
+            tested += 1
+            if (a - mid) * (b - mid) >= 0 or abs(a - b) < 0.25 * (bright - dark):
+                wrong += 1
+        if tested >= 3 and wrong > max_wrong_fraction * tested:
+            return False
+    return True
 
 
 def _grid_reindexings(grid_shape: tuple[int, int]) -> list[np.ndarray]:

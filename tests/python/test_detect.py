@@ -8,7 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from rscalib.detect import DetectOptions, Detector, detect_image, detect_video, local_homography_residual
+from rscalib.detect import (DetectOptions, Detector, _outer_ring_alternates, detect_image, detect_video,
+                            local_homography_residual)
 from rscalib.targets import target_from_dict
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
@@ -160,6 +161,21 @@ def test_partial_views_keep_their_ids():
         assert found.accepted, (name, found.reason)
         assert 8 <= len(found.point_id) < target.num_points * 0.75
         assert np.linalg.norm(found.uv - truth[found.point_id], axis=1).max() < 0.35
+
+
+def test_outer_ring_check_rejects_a_grid_shifted_onto_the_squares_outer_edge():
+    # OpenCV can return such a grid when the board's edge row leaves the image (seen on rendered
+    # 752x480 videos); its ids are off by a row, which wrecks a line-delay estimate.
+    r, t = pose(CHECKERBOARD, roll_deg=8.0)
+    image, h = render(CHECKERBOARD, r, t)
+    rows, cols = CHECKERBOARD.grid_shape
+    step = CHECKERBOARD.points_m[cols, :2] - CHECKERBOARD.points_m[0, :2]   # one row along the target
+    true_uv = project(h, CHECKERBOARD.points_m)
+    assert _outer_ring_alternates(image, true_uv, rows, cols)
+    for sign in (1.0, -1.0):
+        shifted = CHECKERBOARD.points_m.copy()
+        shifted[:, :2] += sign * step
+        assert not _outer_ring_alternates(image, project(h, shifted), rows, cols), sign
 
 
 def test_drop_reasons():
