@@ -24,10 +24,9 @@ from scipy.spatial.transform import Rotation
 from . import _core
 from ._core import CameraModel
 from .errors import InputError
-from .linedelay import UNDETERMINED_STD_FRACTION, _frame_rate, _prepare
-from .noise import estimate_pixel_sigma
+from .linedelay import UNDETERMINED_STD_FRACTION, _frame_rate, _prepare, choose_pixel_sigma, seed_poses
 from .observations import Observations
-from .pnp import FramePoses, per_frame_pnp
+from .pnp import FramePoses
 
 TRAJECTORY_MODEL = "linear"
 
@@ -172,26 +171,9 @@ def calibrate_line_delay_linear(observations: Observations, camera: CameraModel,
         raise InputError("max_frame_interval_s must be positive")
     initial_d = d
 
-    poses = per_frame_pnp(observations, camera)
     frames_total = observations.num_frames
-    used = observations.subset_frames(poses.ok)
-    gs = FramePoses(poses.ok[poses.ok], poses.rotation_vector[poses.ok], poses.translation[poses.ok],
-                    poses.rms_px[poses.ok])
-    if frames_total - used.num_frames > 0:
-        warnings.append(f"{frames_total - used.num_frames} of {frames_total} frames had no PnP pose "
-                        "(too few points) and were left out")
-    if used.num_frames < 2:
-        raise InputError(f"only {used.num_frames} frames have enough target points for a pose")
-
-    if pixel_sigma is not None:
-        if not pixel_sigma > 0:
-            raise InputError("pixel_sigma must be positive")
-        sigma, sigma_source = float(pixel_sigma), "user"
-    else:
-        sigma = estimate_pixel_sigma(used)
-        sigma_source = "grid third differences"
-        if sigma is None:
-            sigma, sigma_source = 0.5, "residuals"
+    used, gs = seed_poses(observations, camera, warnings, min_frames=2)
+    sigma, sigma_source = choose_pixel_sigma(used, pixel_sigma)
 
     options = _core.LinearInterpOptions()
     options.pixel_sigma = sigma

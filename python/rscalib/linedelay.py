@@ -178,6 +178,36 @@ def _prepare(observations: Observations, camera: CameraModel, rows: Optional[int
     return rows
 
 
+def seed_poses(observations: Observations, camera: CameraModel, warnings: list, min_frames: int
+               ) -> tuple[Observations, FramePoses]:
+    """GS PnP per frame, the initial guess of both trajectory models: the observations of the
+    frames with a pose, and those poses. Frames without a pose are left out with a warning."""
+    poses = per_frame_pnp(observations, camera)
+    frames_total = observations.num_frames
+    used = observations.subset_frames(poses.ok)
+    used_poses = FramePoses(poses.ok[poses.ok], poses.rotation_vector[poses.ok],
+                            poses.translation[poses.ok], poses.rms_px[poses.ok])
+    if frames_total - used.num_frames > 0:
+        warnings.append(f"{frames_total - used.num_frames} of {frames_total} frames had no PnP pose "
+                        "(too few points) and were left out")
+    if used.num_frames < min_frames:
+        raise InputError(f"only {used.num_frames} frames have enough target points for a pose")
+    return used, used_poses
+
+
+def choose_pixel_sigma(used: Observations, pixel_sigma: Optional[float]) -> tuple[float, str]:
+    """The detection noise σ (px) and where it came from: the user's, else estimated from the
+    target grid (rscalib.noise), else 0.5 px to be replaced by the residual RMS ("residuals")."""
+    if pixel_sigma is not None:
+        if not pixel_sigma > 0:
+            raise InputError("pixel_sigma must be positive")
+        return float(pixel_sigma), "user"
+    sigma = estimate_pixel_sigma(used)
+    if sigma is None:
+        return 0.5, "residuals"
+    return sigma, "grid third differences"
+
+
 def _frame_rate(observations: Observations) -> float:
     intervals = np.diff(observations.frame_times_s)
     if len(intervals) == 0 or not np.median(intervals) > 0:
@@ -248,27 +278,9 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         # the motion's bandwidth, not the frame rate: at most 1/60 s, also for slow (e.g. 7 fps) cameras.
         min_segment_s = min(0.5 / fps, 1.0 / 60.0)
 
-    # Initial guess: GS PnP per frame; frames without a pose are left out.
-    poses = per_frame_pnp(observations, camera)
     frames_total = observations.num_frames
-    used = observations.subset_frames(poses.ok)
-    used_poses = FramePoses(poses.ok[poses.ok], poses.rotation_vector[poses.ok],
-                            poses.translation[poses.ok], poses.rms_px[poses.ok])
-    if frames_total - used.num_frames > 0:
-        warnings.append(f"{frames_total - used.num_frames} of {frames_total} frames had no PnP pose "
-                        "(too few points) and were left out")
-    if used.num_frames < 4:
-        raise InputError(f"only {used.num_frames} frames have enough target points for a pose")
-
-    if pixel_sigma is not None:
-        if not pixel_sigma > 0:
-            raise InputError("pixel_sigma must be positive")
-        sigma, sigma_source = float(pixel_sigma), "user"
-    else:
-        sigma = estimate_pixel_sigma(used)
-        sigma_source = "grid third differences"
-        if sigma is None:
-            sigma, sigma_source = 0.5, "residuals"
+    used, used_poses = seed_poses(observations, camera, warnings, min_frames=4)
+    sigma, sigma_source = choose_pixel_sigma(used, pixel_sigma)
 
     t_begin = float(used.frame_times_s[0])
     t_end = float(used.frame_times_s[-1] + 1.0 / fps)  # the last frame's readout
