@@ -13,6 +13,7 @@
 #include "rscalib/rs/error_standardisation.hpp"
 #include "rscalib/rs/motion_prior_cost.hpp"
 #include "rscalib/rs/rs_reprojection_cost.hpp"
+#include "scalar_variance.hpp"
 
 namespace rscalib::rs {
 
@@ -302,18 +303,9 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations,
   summary.line_delay_std_s = std::numeric_limits<double>::infinity();
   if (options.compute_covariance && options.estimate_line_delay && problem) {
     const auto covariance_started = Clock::now();
-    ceres::Covariance::Options covariance_options;
-    covariance_options.num_threads = std::max(1, options.num_threads);
-    covariance_options.algorithm_type = ceres::SPARSE_QR;
-    ceres::Covariance covariance(covariance_options);
-    std::vector<std::pair<const double*, const double*>> blocks = {{line_delay_s, line_delay_s}};
-    if (covariance.Compute(blocks, problem.get())) {
-      double variance = 0.0;
-      covariance.GetCovarianceBlock(line_delay_s, line_delay_s, &variance);
-      if (variance >= 0.0 && std::isfinite(variance)) {
-        summary.line_delay_std_s = std::sqrt(variance);
-        summary.covariance_ok = true;
-      }
+    if (const auto variance = detail::ScalarVariance(problem.get(), line_delay_s, options.num_threads)) {
+      summary.line_delay_std_s = std::sqrt(*variance);
+      summary.covariance_ok = true;
     }
     summary.covariance_time_s = Seconds(covariance_started);
   } else if (!options.estimate_line_delay) {
