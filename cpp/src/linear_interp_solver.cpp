@@ -14,6 +14,7 @@
 #include "rscalib/rs/error_standardisation.hpp"
 #include "rscalib/rs/linear_interp_cost.hpp"
 #include "scalar_variance.hpp"
+#include "solver_setup.hpp"
 
 namespace rscalib::rs {
 
@@ -187,23 +188,8 @@ LinearInterpSummary SolveLineDelayLinear(const LinearInterpObservations& observa
     summary.num_chains += linked_to_next[k] && (k == 0 || !linked_to_next[k - 1]);
   }
 
-  std::unique_ptr<ceres::LossFunction> loss;
-  if (options.robust_loss == "huber") loss = std::make_unique<ceres::HuberLoss>(options.robust_loss_scale);
-  if (options.robust_loss == "cauchy") loss = std::make_unique<ceres::CauchyLoss>(options.robust_loss_scale);
-
-  ceres::Solver::Options solver_options;
-  solver_options.trust_region_strategy_type = ceres::DOGLEG;
-  solver_options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  solver_options.sparse_linear_algebra_library_type =
-      ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE
-                                                                           : ceres::EIGEN_SPARSE;
-  solver_options.num_threads = std::max(1, options.num_threads);
-  solver_options.max_num_iterations = options.max_iterations;
-  solver_options.function_tolerance = options.function_tolerance;
-  solver_options.gradient_tolerance = options.gradient_tolerance;
-  solver_options.parameter_tolerance = options.parameter_tolerance;
-  solver_options.minimizer_progress_to_stdout = options.verbose;
-  solver_options.logging_type = options.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
+  std::unique_ptr<ceres::LossFunction> loss = detail::MakeRobustLoss(options.robust_loss, options.robust_loss_scale);
+  const ceres::Solver::Options solver_options = detail::MakeSolverOptions(options);
 
   double* poses = frame_poses->data();
   std::unique_ptr<ceres::Problem> problem;
