@@ -267,6 +267,24 @@ def test_cli_on_the_opencv_stills(tmp_path):
     assert quoted.returncode == 0, quoted.stderr
 
 
+def _synthetic_stills(folder: Path, count: int = 4) -> list:
+    """Views of OPENCV_BOARD (pinhole warps of its drawing) when the shared fixtures are absent."""
+    folder.mkdir()
+    target = target_from_dict(OPENCV_BOARD)
+    k = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
+    centre = 0.5 * (target.points_m.min(0) + target.points_m.max(0))
+    paths = []
+    for i in range(count):
+        r = cv2.Rodrigues(np.array([0.25 * np.cos(i), 0.25 * np.sin(i), 0.1 * i]))[0]
+        t = np.array([0.0, 0.0, 0.45]) - r @ centre
+        board, h_board = target.draw(pixels_per_metre=1500.0, margin_m=0.02)
+        h_image = k @ np.column_stack([r[:, 0], r[:, 1], t])
+        image = cv2.warpPerspective(board, h_image @ np.linalg.inv(h_board), (640, 480), borderValue=110)
+        paths.append(str(folder / f"view{i}.png"))
+        cv2.imwrite(paths[-1], image)
+    return paths
+
+
 def _bad_inputs(tmp):
     """(name, argv) of commands that must exit 2 with a one-line reason."""
     good = write_target(tmp / "good.yaml", OPENCV_BOARD)
@@ -280,7 +298,7 @@ def _bad_inputs(tmp):
     blank.mkdir()
     for i in range(4):
         cv2.imwrite(str(blank / f"{i}.png"), np.full((120, 160), 128, np.uint8))
-    stills = [str(p) for p in STILLS[:4]] or [str(blank / "0.png")]
+    stills = [str(p) for p in STILLS[:4]] or _synthetic_stills(tmp / "stills")
     out = tmp / "out"
     return {
         "missing input": ["intrinsics", tmp / "nope.mp4", "--target", good, "--out", out],
