@@ -6,7 +6,7 @@
 #include <random>
 #include <vector>
 
-#include "rscalib/geometry/pose.hpp"
+#include "rscalib/spline/pose_spline.hpp"
 #include "rscalib/spline/cubic_bspline.hpp"
 
 using Clock = std::chrono::steady_clock;
@@ -27,7 +27,7 @@ int main(int argc, char** argv) {
   const double evaluate_ns = std::chrono::duration<double, std::nano>(Clock::now() - started).count() / calls;
 
   started = Clock::now();
-  for (double t : times) sink += rscalib::geometry::PoseAt(spline, t).translation_cw[0];
+  for (double t : times) sink += rscalib::spline::PoseAt(spline, t).translation_cw[0];
   const double pose_ns = std::chrono::duration<double, std::nano>(Clock::now() - started).count() / calls;
 
   // The cost functors' path: cached span power basis, 4 control points, rotate a point.

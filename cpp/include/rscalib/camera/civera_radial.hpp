@@ -1,6 +1,7 @@
 #pragma once
-// Civera's radial model (SPEC §4), defined from distorted to undistorted pixels with
-// radii in millimetres via the pixel size (dx, dy) mm/pixel:
+// Civera's radial model (Civera et al. 2009 §III; docs/formulation.md §10), defined from
+// distorted to undistorted pixels with radii in millimetres via the pixel size (dx, dy)
+// mm/pixel:
 //   r_d = sqrt((dx (u_d - Cx))^2 + (dy (v_d - Cy))^2)
 //   u_u = Cx + (u_d - Cx)(1 + k1 r_d^2 + k2 r_d^4),  v likewise
 // Projection: u_u = Cx + f h_x / h_z, v_u = Cy + f h_y / h_z, then the distorted pixel by

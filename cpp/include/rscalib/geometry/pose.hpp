@@ -1,10 +1,9 @@
 #pragma once
 // Camera pose T_cw = (R, p): x_c = R x_w + p (world = target frame). The trajectory
-// state is x = [p; phi] in R^6 (translation first, then rotation vector), SPEC §2.
+// state is x = [p; phi] in R^6 (translation first, then rotation vector), docs/conventions.md
+// "Frames and poses". A pose at a time of a pose spline: spline/pose_spline.hpp.
 #include <Eigen/Core>
 #include <ceres/rotation.h>
-
-#include "rscalib/spline/cubic_bspline.hpp"
 
 namespace rscalib::geometry {
 
@@ -26,8 +25,5 @@ void TransformWorldToCamera(const T* state, const P* point_w, T* point_c) {
 }
 
 Pose PoseFromState(const Eigen::Matrix<double, 6, 1>& state);
-
-// T_cw(t) of a 6-D pose spline.
-Pose PoseAt(const spline::CubicBSpline& pose_spline, double t);
 
 }  // namespace rscalib::geometry

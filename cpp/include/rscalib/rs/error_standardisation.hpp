@@ -1,6 +1,7 @@
 #pragma once
-// Error standardisation (paper §3.5, SPEC §2). Noise n ~ N(0, R) on the measurement
-// y = (u, v) also moves the observation time through v, so the error is
+// Error standardisation (Oth et al. 2013 §3.5, eq. 15-21; docs/formulation.md §4).
+// Noise n ~ N(0, R) on the measurement y = (u, v) also moves the observation time through
+// v, so the error is
 //   e ~ e_bar + A n,   A = I - d [[0, u_dot], [0, v_dot]],
 // (u_dot, v_dot) = d/dt pi(T_cw(t) P) at t = t_i + v d. Cov(e) = A R A^T; its inverse
 // square root weights the residual. det A = 1 - d v_dot -> 0 when the point moves down

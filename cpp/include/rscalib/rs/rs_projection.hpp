@@ -16,6 +16,12 @@ struct SpanCamera {
   const double* pixel_size_mm;   // civera-radial only
 };
 
+// The SpanCamera of `camera` (which must outlive it).
+inline SpanCamera MakeSpanCamera(const camera::CameraModel& camera) {
+  return SpanCamera{camera.type(), camera.params().data(),
+                    static_cast<int>(camera.params().size()), camera.pixel_size_mm().data()};
+}
+
 // uv = pi(T_cw(t) P) with t = span_start + u and the pose from the span's 4 control
 // points c[0..3] (each [p; phi]). Returns false if the point cannot be projected.
 template <typename T>

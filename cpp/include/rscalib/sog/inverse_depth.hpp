@@ -18,6 +18,14 @@ Eigen::Matrix<T, 3, 1> DirectionFromAngles(const T& theta, const T& phi) {
   return Eigen::Matrix<T, 3, 1>(cos(phi) * sin(theta), -sin(phi), cos(phi) * cos(theta));
 }
 
+// dm/dtheta and dm/dphi.
+inline Eigen::Vector3d DirectionDTheta(double theta, double phi) {
+  return {std::cos(phi) * std::cos(theta), 0.0, -std::cos(phi) * std::sin(theta)};
+}
+inline Eigen::Vector3d DirectionDPhi(double theta, double phi) {
+  return {-std::sin(phi) * std::sin(theta), -std::cos(phi), -std::sin(phi) * std::cos(theta)};
+}
+
 // X and d_xyz_d_inverse_depth (3x6).
 Eigen::Vector3d InverseDepthToXyz(const InverseDepthPoint& y,
                                   Eigen::Matrix<double, 3, 6>* d_xyz_d_y = nullptr);

@@ -23,6 +23,7 @@ PYBIND11_MODULE(_core, m) {
   m.attr("__version__") = RSCALIB_VERSION;
   py::register_exception<rscalib::InputError>(m, "InputError", PyExc_ValueError);
   rscalib::python::BindSpline(m);
+  rscalib::python::BindGeometry(m);
   rscalib::python::BindCamera(m);
   rscalib::python::BindRs(m);
   rscalib::python::BindRsLinear(m);

@@ -1,10 +1,8 @@
+#include "rscalib/geometry/rotation.hpp"
+
 #include <cmath>
 
 #include <Eigen/Geometry>
-
-#include "rscalib/core/error.hpp"
-#include "rscalib/geometry/pose.hpp"
-#include "rscalib/geometry/rotation.hpp"
 
 namespace rscalib::geometry {
 
@@ -43,20 +41,6 @@ Eigen::MatrixX3d UnwrapRotationVectors(const Eigen::MatrixX3d& rotation_vectors)
     out.row(k) = best.transpose();
   }
   return out;
-}
-
-Pose PoseFromState(const Eigen::Matrix<double, 6, 1>& state) {
-  Pose pose;
-  pose.translation_cw = state.head<3>();
-  pose.rotation_cw = RotationVectorToMatrix(state.data() + 3);
-  return pose;
-}
-
-Pose PoseAt(const spline::CubicBSpline& pose_spline, double t) {
-  if (pose_spline.dimension() != kPoseStateDim)
-    throw InputError("a pose spline has dimension 6 ([translation; rotation vector])");
-  Eigen::Matrix<double, 6, 1> state = pose_spline.Evaluate(t, 0);
-  return PoseFromState(state);
 }
 
 }  // namespace rscalib::geometry

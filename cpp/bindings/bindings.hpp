@@ -9,6 +9,7 @@ namespace py = pybind11;
 using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
 void BindSpline(py::module_& m);
+void BindGeometry(py::module_& m);
 void BindCamera(py::module_& m);
 void BindRs(py::module_& m);
 void BindRsLinear(py::module_& m);

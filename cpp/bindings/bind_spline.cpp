@@ -1,12 +1,11 @@
-// Bindings: cubic B-spline, spline fitting, rotation vectors and poses.
+// Bindings: cubic B-spline, spline fitting and poses of a pose spline.
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
 #include "bindings.hpp"
 #include "rscalib/core/error.hpp"
-#include "rscalib/geometry/pose.hpp"
-#include "rscalib/geometry/rotation.hpp"
 #include "rscalib/spline/cubic_bspline.hpp"
+#include "rscalib/spline/pose_spline.hpp"
 #include "rscalib/spline/spline_fit.hpp"
 
 namespace rscalib::python {
@@ -126,18 +125,10 @@ Segment s is [breakpoints[s], breakpoints[s+1]); span = segment + 3 in the knot 
 min sum_s w_s |x(t_s) - y_s|^2 + sum_d lambda_d * integral (x_d'')^2 dt.
 acceleration_weight: [] (none), [lambda] or one lambda per dimension.)doc");
 
-  m.def("unwrap_rotation_vectors", &geometry::UnwrapRotationVectors, py::arg("rotation_vectors"),
-        "Paper eq. 22: make a (n, 3) sequence of rotation vectors continuous (2*pi per axis).");
-  m.def(
-      "rotation_vector_to_matrix",
-      [](const Eigen::Vector3d& phi) { return geometry::RotationVectorToMatrix(phi.data()); },
-      py::arg("rotation_vector"));
-  m.def("rotation_matrix_to_vector", &geometry::RotationMatrixToVector, py::arg("rotation"));
   m.def(
       "poses_at",
       [](const CubicBSpline& pose_spline, const DoubleArray& times) {
-        if (pose_spline.dimension() != geometry::kPoseStateDim)
-          throw InputError("a pose spline has dimension 6 ([translation; rotation vector])");
+        spline::CheckPoseSpline(pose_spline);
         const py::ssize_t count = times.size();
         py::array_t<double> rotations({count, py::ssize_t{3}, py::ssize_t{3}});
         py::array_t<double> translations({count, py::ssize_t{3}});

@@ -120,9 +120,7 @@ void BindRs(py::module_& m) {
         if (span < 3 || span >= trajectory.num_control_points())
           throw InputError("span out of range");
         const auto basis = trajectory.PowerBasis(span);
-        const rs::SpanCamera cam{camera.type(), camera.params().data(),
-                                 static_cast<int>(camera.params().size()),
-                                 camera.pixel_size_mm().data()};
+        const rs::SpanCamera cam = rs::MakeSpanCamera(camera);
         std::unique_ptr<ceres::CostFunction> cost(rs::RsReprojectionCost::Create(
             basis, cam, frame_time_s - basis.span_start, uv.data(), point_w.data(),
             sqrt_information));

@@ -1,0 +1,198 @@
+// The rolling-shutter batch problem. All Ceres autodiff instantiations of the RS
+// functors live in this one translation unit (compile time).
+#include "rscalib/rs/line_delay_solver.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <memory>
+
+#include <ceres/ceres.h>
+
+#include "rscalib/core/error.hpp"
+#include "rscalib/rs/motion_prior_cost.hpp"
+#include "rscalib/rs/rs_reprojection_cost.hpp"
+#include "solver_common.hpp"
+
+namespace rscalib::rs {
+
+namespace {
+
+using spline::CubicBSpline;
+using spline::SpanPowerBasis;
+
+// The span an observation is attached to, and its weighted error there.
+struct Attachment {
+  int span = -1;
+  detail::WeightedError error;
+};
+
+// Span, image velocity and weight of every observation at the current estimate.
+std::vector<Attachment> Attach(const RsObservations& obs, const camera::CameraModel& camera,
+                               const CubicBSpline& trajectory,
+                               const std::vector<SpanPowerBasis>& bases, double line_delay_s,
+                               const RsSolverOptions& options) {
+  using Jet = ceres::Jet<double, 1>;
+  const SpanCamera cam = MakeSpanCamera(camera);
+  const auto& control = trajectory.control_points();
+  const int n = trajectory.num_control_points();
+  std::vector<Attachment> out(obs.uv.rows());
+  for (Eigen::Index m = 0; m < obs.uv.rows(); ++m) {
+    Attachment& a = out[m];
+    detail::WeightedError& e = a.error;
+    e.time_s = obs.frame_time_s[m] + obs.uv(m, 1) * line_delay_s;
+    a.span = spline::FindSpan(trajectory.knots().data(), n, e.time_s);
+    const SpanPowerBasis& basis = bases[a.span - spline::kSplineDegree];
+    Jet c_storage[4][6];
+    const Jet* c[4];
+    for (int j = 0; j < 4; ++j) {
+      for (int d = 0; d < 6; ++d) c_storage[j][d] = Jet(control(a.span - 3 + j, d));
+      c[j] = c_storage[j];
+    }
+    const double point_w[3] = {obs.point_w(m, 0), obs.point_w(m, 1), obs.point_w(m, 2)};
+    // t as a Jet: the derivative of uv is the image velocity for A.
+    Jet uv[2];
+    if (!ProjectAtSpanTime(basis, cam, point_w, c, Jet(e.time_s - basis.span_start, 0), uv))
+      continue;
+    detail::SetWeightedError(obs.uv.row(m).transpose(), Eigen::Vector2d(uv[0].a, uv[1].a),
+                             Eigen::Vector2d(uv[0].v[0], uv[1].v[0]), line_delay_s,
+                             options.standardise_errors, options.pixel_sigma,
+                             options.max_rs_gain, &e);
+  }
+  return out;
+}
+
+std::vector<SpanPowerBasis> AllSpanBases(const CubicBSpline& trajectory) {
+  std::vector<SpanPowerBasis> bases;
+  for (int span = spline::kSplineDegree; span < trajectory.num_control_points(); ++span)
+    bases.push_back(trajectory.PowerBasis(span));
+  return bases;
+}
+
+void Validate(const RsObservations& obs, const camera::CameraModel& camera,
+              const CubicBSpline& trajectory, const RsSolverOptions& options) {
+  const Eigen::Index m = obs.uv.rows();
+  if (obs.frame_time_s.size() != m || obs.point_w.rows() != m)
+    throw InputError("observations: frame_time_s, uv and point_w must have the same length");
+  if (m == 0) throw InputError("no observations");
+  if (trajectory.dimension() != geometry::kPoseStateDim)
+    throw InputError("the trajectory must be a 6-D pose spline [p; phi]");
+  detail::ValidateNoiseOptions(options.pixel_sigma, options.max_rs_gain);
+  if ((options.motion_prior_q.array() <= 0.0).any())
+    throw InputError("motion prior Q must be positive");
+  detail::ValidateRobustLoss(options.robust_loss);
+  if (!obs.uv.allFinite() || !obs.frame_time_s.allFinite() || !obs.point_w.allFinite())
+    throw InputError("observations contain NaN or infinity");
+  (void)camera;
+}
+
+double PriorCost(const CubicBSpline& trajectory, const RsSolverOptions& options) {
+  if (!options.use_motion_prior) return 0.0;
+  double cost = 0.0;
+  const auto& control = trajectory.control_points();
+  for (int span = spline::kSplineDegree; span < trajectory.num_control_points(); ++span) {
+    if (trajectory.knots()[span + 1] <= trajectory.knots()[span]) continue;
+    std::unique_ptr<ceres::CostFunction> f(
+        MotionPriorCost::Create(trajectory.knots().data(), span, options.motion_prior_q));
+    const double* blocks[4];
+    for (int j = 0; j < 4; ++j) blocks[j] = control.data() + 6 * (span - 3 + j);
+    double r[12];
+    f->Evaluate(blocks, r, nullptr);
+    for (double x : r) cost += x * x;
+  }
+  return cost;
+}
+
+void FillStatistics(const CubicBSpline& trajectory, const std::vector<Attachment>& attached,
+                    const RsSolverOptions& options, RsSolveSummary* summary) {
+  std::vector<const detail::WeightedError*> errors;
+  for (const Attachment& a : attached) errors.push_back(&a.error);
+  detail::FillErrorStatistics(errors, summary);
+  summary->segment_cost.assign(trajectory.num_segments(), 0.0);
+  summary->segment_count.assign(trajectory.num_segments(), 0);
+  summary->unprojectable = 0;
+  for (size_t i = 0; i < attached.size(); ++i) {
+    if (!attached[i].error.ok) {
+      ++summary->unprojectable;
+      continue;
+    }
+    const int segment = attached[i].span - spline::kSplineDegree;
+    summary->segment_cost[segment] += summary->standardised_sq[i];
+    summary->segment_count[segment] += 1;
+  }
+  summary->prior_cost = PriorCost(trajectory, options);
+}
+
+}  // namespace
+
+RsSolveSummary EvaluateLineDelay(const RsObservations& observations,
+                                 const camera::CameraModel& camera,
+                                 const spline::CubicBSpline& trajectory, double line_delay_s,
+                                 const RsSolverOptions& options) {
+  Validate(observations, camera, trajectory, options);
+  RsSolveSummary summary;
+  const auto bases = AllSpanBases(trajectory);
+  const auto attached = Attach(observations, camera, trajectory, bases, line_delay_s, options);
+  FillStatistics(trajectory, attached, options, &summary);
+  summary.line_delay_s = line_delay_s;
+  return summary;
+}
+
+RsSolveSummary SolveLineDelay(const RsObservations& observations,
+                              const camera::CameraModel& camera, spline::CubicBSpline* trajectory,
+                              double* line_delay_s, const RsSolverOptions& options) {
+  Validate(observations, camera, *trajectory, options);
+  const auto started = std::chrono::steady_clock::now();
+  RsSolveSummary summary;
+  const SpanCamera cam = MakeSpanCamera(camera);
+  const auto bases = AllSpanBases(*trajectory);
+  double* control = trajectory->mutable_control_points().data();
+  const double* knots = trajectory->knots().data();
+
+  std::vector<Attachment> attached;
+  std::vector<int> previous_span;
+  // Re-attach every observation to the span of its current time t_i + v d.
+  const auto reattach = [&]() {
+    attached = Attach(observations, camera, *trajectory, bases, *line_delay_s, options);
+    int reattached = 0;
+    for (size_t i = 0; i < previous_span.size(); ++i)
+      reattached += attached[i].span != previous_span[i];
+    summary.reattached = reattached;
+    previous_span.resize(attached.size());
+    for (size_t i = 0; i < attached.size(); ++i) previous_span[i] = attached[i].span;
+    return reattached != 0;
+  };
+  const auto add_residuals = [&](ceres::Problem* problem, ceres::LossFunction* loss) {
+    for (Eigen::Index m = 0; m < observations.uv.rows(); ++m) {
+      const Attachment& a = attached[m];
+      if (!a.error.ok) continue;
+      const SpanPowerBasis& basis = bases[a.span - spline::kSplineDegree];
+      const double uv[2] = {observations.uv(m, 0), observations.uv(m, 1)};
+      const double point_w[3] = {observations.point_w(m, 0), observations.point_w(m, 1),
+                                 observations.point_w(m, 2)};
+      double* c0 = control + 6 * (a.span - 3);
+      problem->AddResidualBlock(
+          RsReprojectionCost::Create(basis, cam, observations.frame_time_s[m] - basis.span_start,
+                                     uv, point_w, a.error.sqrt_information),
+          loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s);
+    }
+    if (options.use_motion_prior) {
+      for (int span = spline::kSplineDegree; span < trajectory->num_control_points(); ++span) {
+        if (knots[span + 1] <= knots[span]) continue;
+        double* c0 = control + 6 * (span - 3);
+        problem->AddResidualBlock(MotionPriorCost::Create(knots, span, options.motion_prior_q),
+                                  nullptr, c0, c0 + 6, c0 + 12, c0 + 18);
+      }
+    }
+  };
+  detail::SolveSettings settings = detail::MakeSolveSettings(options);
+  settings.failure_message = "the line-delay solve failed: ";
+  const detail::SolveResult result =
+      detail::SolveWithCovariance(settings, line_delay_s, started, reattach, add_residuals);
+  result.CopyTo(&summary);
+
+  attached = Attach(observations, camera, *trajectory, bases, *line_delay_s, options);
+  FillStatistics(*trajectory, attached, options, &summary);
+  return summary;
+}
+
+}  // namespace rscalib::rs

@@ -1,0 +1,151 @@
+#include "solver_common.hpp"
+
+#include <algorithm>
+#include <memory>
+#include <optional>
+#include <utility>
+
+#include <ceres/ceres.h>
+
+#include "rscalib/core/error.hpp"
+#include "rscalib/rs/error_standardisation.hpp"
+
+namespace rscalib::rs::detail {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Seconds(Clock::time_point since) {
+  return std::chrono::duration<double>(Clock::now() - since).count();
+}
+
+// "huber" / "cauchy" with its scale in standardised units; nullptr (plain least squares)
+// otherwise.
+std::unique_ptr<ceres::LossFunction> MakeRobustLoss(const std::string& name, double scale) {
+  if (name == "huber") return std::make_unique<ceres::HuberLoss>(scale);
+  if (name == "cauchy") return std::make_unique<ceres::CauchyLoss>(scale);
+  return nullptr;
+}
+
+// DogLeg on sparse normal equations (CHOLMOD when SuiteSparse is there).
+ceres::Solver::Options MakeSolverOptions(const SolveSettings& settings) {
+  ceres::Solver::Options solver_options;
+  solver_options.trust_region_strategy_type = ceres::DOGLEG;
+  solver_options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  solver_options.sparse_linear_algebra_library_type =
+      ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE
+                                                                           : ceres::EIGEN_SPARSE;
+  solver_options.num_threads = std::max(1, settings.num_threads);
+  solver_options.max_num_iterations = settings.max_iterations;
+  solver_options.function_tolerance = settings.function_tolerance;
+  solver_options.gradient_tolerance = settings.gradient_tolerance;
+  solver_options.parameter_tolerance = settings.parameter_tolerance;
+  solver_options.minimizer_progress_to_stdout = settings.verbose;
+  solver_options.logging_type = settings.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
+  return solver_options;
+}
+
+// Variance of the 1-D parameter block `parameter` of `problem` at its current value (Ceres'
+// Covariance, sparse QR: it copes with the gauge freedoms of a trajectory). nullopt when
+// Ceres cannot compute it or the result is not a finite non-negative number.
+std::optional<double> ScalarVariance(ceres::Problem* problem, const double* parameter,
+                                     int num_threads) {
+  ceres::Covariance::Options covariance_options;
+  covariance_options.num_threads = std::max(1, num_threads);
+  covariance_options.algorithm_type = ceres::SPARSE_QR;
+  ceres::Covariance covariance(covariance_options);
+  const std::vector<std::pair<const double*, const double*>> blocks = {{parameter, parameter}};
+  if (!covariance.Compute(blocks, problem)) return std::nullopt;
+  double variance = 0.0;
+  covariance.GetCovarianceBlock(parameter, parameter, &variance);
+  if (!(variance >= 0.0) || !std::isfinite(variance)) return std::nullopt;
+  return variance;
+}
+
+}  // namespace
+
+void ValidateNoiseOptions(double pixel_sigma, double max_rs_gain) {
+  if (!(pixel_sigma > 0.0)) throw InputError("pixel_sigma must be positive");
+  if (!(max_rs_gain > 0.0 && max_rs_gain < 1.0)) throw InputError("max_rs_gain must be in (0, 1)");
+}
+
+void ValidateRobustLoss(const std::string& robust_loss) {
+  if (robust_loss != "none" && robust_loss != "huber" && robust_loss != "cauchy")
+    throw InputError("robust_loss must be none, huber or cauchy");
+}
+
+void SetWeightedError(const Eigen::Vector2d& measured_uv, const Eigen::Vector2d& predicted_uv,
+                      const Eigen::Vector2d& image_velocity_px_s, double line_delay_s,
+                      bool standardise_errors, double pixel_sigma, double max_rs_gain,
+                      WeightedError* error) {
+  error->ok = std::isfinite(predicted_uv[0]) && std::isfinite(predicted_uv[1]);
+  if (!error->ok) return;
+  error->residual_px = measured_uv - predicted_uv;
+  if (standardise_errors) {
+    const StandardisationWeight w =
+        ComputeStandardisationWeight(line_delay_s, image_velocity_px_s, pixel_sigma, max_rs_gain);
+    error->sqrt_information = w.sqrt_information;
+    error->clamped = w.clamped;
+  } else {
+    error->sqrt_information = Eigen::Matrix2d::Identity() / pixel_sigma;
+  }
+}
+
+SolveResult SolveWithCovariance(const SolveSettings& settings, double* line_delay_s,
+                                Clock::time_point started, const Relinearise& relinearise,
+                                const AddResiduals& add_residuals) {
+  const std::unique_ptr<ceres::LossFunction> loss =
+      MakeRobustLoss(settings.robust_loss, settings.robust_loss_scale);
+  const ceres::Solver::Options solver_options = MakeSolverOptions(settings);
+
+  SolveResult result;
+  std::unique_ptr<ceres::Problem> problem;
+  double d_at_build = std::numeric_limits<double>::quiet_NaN();
+  for (int outer = 0; outer < std::max(1, settings.max_outer_iterations); ++outer) {
+    const bool changed = relinearise();
+    const bool d_settled =
+        !settings.wait_for_line_delay ||
+        std::abs(*line_delay_s - d_at_build) <= 1e-3 * std::max(std::abs(*line_delay_s), 1e-9);
+    if (outer > 0 && !changed && d_settled) break;
+    d_at_build = *line_delay_s;
+
+    ceres::Problem::Options problem_options;
+    problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    problem = std::make_unique<ceres::Problem>(problem_options);
+    problem->AddParameterBlock(line_delay_s, 1);
+    add_residuals(problem.get(), loss.get());
+    if (!settings.estimate_line_delay) problem->SetParameterBlockConstant(line_delay_s);
+
+    if (settings.max_iterations <= 0) {  // evaluation / covariance only
+      result.converged = true;
+      result.message = "not solved (max_iterations = 0)";
+      result.outer_iterations = outer + 1;
+      break;
+    }
+    ceres::Solver::Summary ceres_summary;
+    ceres::Solve(solver_options, problem.get(), &ceres_summary);
+    result.iterations += static_cast<int>(ceres_summary.iterations.size());
+    result.outer_iterations = outer + 1;
+    result.converged = ceres_summary.termination_type == ceres::CONVERGENCE;
+    result.message = ceres_summary.message;
+    if (ceres_summary.termination_type == ceres::FAILURE)
+      throw InputError(settings.failure_message + ceres_summary.message);
+  }
+  result.solve_time_s = Seconds(started);
+  result.line_delay_s = *line_delay_s;
+
+  if (settings.compute_covariance && settings.estimate_line_delay && problem) {
+    const auto covariance_started = Clock::now();
+    if (const auto variance = ScalarVariance(problem.get(), line_delay_s, settings.num_threads)) {
+      result.line_delay_std_s = std::sqrt(*variance);
+      result.covariance_ok = true;
+    }
+    result.covariance_time_s = Seconds(covariance_started);
+  } else if (!settings.estimate_line_delay) {
+    result.line_delay_std_s = 0.0;
+  }
+  return result;
+}
+
+}  // namespace rscalib::rs::detail

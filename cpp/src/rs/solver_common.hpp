@@ -1,0 +1,168 @@
+// Private to the two line-delay solvers (not installed): what the spline solver
+// (line_delay_solver.cpp) and the linear baseline (linear_interp_solver.cpp) share.
+//   - input checks of the options both have,
+//   - the weighted error of one observation at the current estimate (docs/formulation.md §4),
+//   - the statistics of those errors in a summary,
+//   - the outer loop: re-linearise, rebuild the Ceres problem, solve, until nothing changes
+//     (docs/formulation.md §3, §6), then the marginal standard deviation of d.
+// The Ceres cost functors are not instantiated here (each solver's own translation unit).
+#pragma once
+
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace ceres {
+class LossFunction;
+class Problem;
+}  // namespace ceres
+
+namespace rscalib::rs::detail {
+
+// ------------------------------------------------------------------------------ options
+
+// Throws InputError unless pixel_sigma > 0 and max_rs_gain is in (0, 1).
+void ValidateNoiseOptions(double pixel_sigma, double max_rs_gain);
+// Throws InputError unless the name is none, huber or cauchy.
+void ValidateRobustLoss(const std::string& robust_loss);
+
+// The options of the outer loop and of each Ceres solve (fields both option structs have).
+struct SolveSettings {
+  std::string robust_loss = "none";  // none | huber | cauchy
+  double robust_loss_scale = 3.0;    // in standardised units (sigmas)
+  int max_iterations = 100;          // per Ceres solve; 0: build + covariance only
+  int max_outer_iterations = 4;
+  double function_tolerance = 1e-9;
+  double gradient_tolerance = 1e-12;
+  double parameter_tolerance = 1e-10;
+  int num_threads = 2;
+  bool verbose = false;
+  bool estimate_line_delay = true;
+  bool compute_covariance = true;
+  // Stop only once d has settled too (when the weights or the attachment depend on d).
+  bool wait_for_line_delay = true;
+  // Start of the InputError thrown when Ceres reports a failure.
+  std::string failure_message = "the solve failed: ";
+};
+
+template <typename Options>
+SolveSettings MakeSolveSettings(const Options& options) {
+  SolveSettings s;
+  s.robust_loss = options.robust_loss;
+  s.robust_loss_scale = options.robust_loss_scale;
+  s.max_iterations = options.max_iterations;
+  s.max_outer_iterations = options.max_outer_iterations;
+  s.function_tolerance = options.function_tolerance;
+  s.gradient_tolerance = options.gradient_tolerance;
+  s.parameter_tolerance = options.parameter_tolerance;
+  s.num_threads = options.num_threads;
+  s.verbose = options.verbose;
+  s.estimate_line_delay = options.estimate_line_delay;
+  s.compute_covariance = options.compute_covariance;
+  return s;
+}
+
+// --------------------------------------------------------------------- weighted errors
+
+// One observation's error e = y - pi(...) at the current estimate and its weight W.
+struct WeightedError {
+  bool ok = false;  // projectable at the current estimate
+  bool clamped = false;
+  Eigen::Matrix2d sqrt_information = Eigen::Matrix2d::Identity();
+  Eigen::Vector2d residual_px = Eigen::Vector2d::Zero();
+  double time_s = 0.0;
+};
+
+// Sets ok (uv finite), the raw error and W: A^{-1} / sigma with A from the image velocity
+// (px/s) when standardising, else I / sigma. `error` keeps ok = false when uv is not finite.
+void SetWeightedError(const Eigen::Vector2d& measured_uv, const Eigen::Vector2d& predicted_uv,
+                      const Eigen::Vector2d& image_velocity_px_s, double line_delay_s,
+                      bool standardise_errors, double pixel_sigma, double max_rs_gain,
+                      WeightedError* error);
+
+// Per-observation outputs and totals both summaries have. `Summary` has residual_px,
+// standardised_sq, observation_time_s, measurement_cost, num_error_terms, clamped_weights
+// and rms_px. Rows of errors that are not ok are NaN and not counted.
+template <typename Summary>
+void FillErrorStatistics(const std::vector<const WeightedError*>& errors, Summary* summary) {
+  const Eigen::Index m = static_cast<Eigen::Index>(errors.size());
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  summary->residual_px.resize(m, 2);
+  summary->standardised_sq.resize(m);
+  summary->observation_time_s.resize(m);
+  summary->measurement_cost = 0.0;
+  summary->num_error_terms = 0;
+  summary->clamped_weights = 0;
+  double sum_sq_px = 0.0;
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const WeightedError& e = *errors[i];
+    summary->observation_time_s[i] = e.time_s;
+    if (!e.ok) {
+      summary->residual_px.row(i).setConstant(nan);
+      summary->standardised_sq[i] = nan;
+      continue;
+    }
+    summary->clamped_weights += e.clamped;
+    const double sq = (e.sqrt_information * e.residual_px).squaredNorm();
+    summary->residual_px.row(i) = e.residual_px.transpose();
+    summary->standardised_sq[i] = sq;
+    summary->measurement_cost += sq;
+    summary->num_error_terms += 1;
+    sum_sq_px += e.residual_px.squaredNorm();
+  }
+  summary->rms_px =
+      summary->num_error_terms ? std::sqrt(sum_sq_px / (2.0 * summary->num_error_terms)) : 0.0;
+}
+
+// ------------------------------------------------------------------ solve and covariance
+
+// What the outer loop reports; CopyTo() writes it into a solver summary.
+struct SolveResult {
+  bool converged = false;
+  std::string message;
+  int iterations = 0;  // Ceres iterations over all outer loops
+  int outer_iterations = 0;
+  double line_delay_s = 0.0;
+  double solve_time_s = 0.0;
+  double line_delay_std_s = std::numeric_limits<double>::infinity();
+  bool covariance_ok = false;
+  double covariance_time_s = 0.0;
+
+  template <typename Summary>
+  void CopyTo(Summary* summary) const {
+    summary->converged = converged;
+    summary->message = message;
+    summary->iterations = iterations;
+    summary->outer_iterations = outer_iterations;
+    summary->line_delay_s = line_delay_s;
+    summary->solve_time_s = solve_time_s;
+    summary->line_delay_std_s = line_delay_std_s;
+    summary->covariance_ok = covariance_ok;
+    summary->covariance_time_s = covariance_time_s;
+  }
+};
+
+// Called at the start of every outer iteration: re-linearise at the current estimate
+// (attach / pair every observation, recompute the weights) and return whether any
+// observation changed its attachment since the previous call.
+using Relinearise = std::function<bool()>;
+// Adds the residual blocks of the current attachment (the parameter block line_delay_s is
+// already in the problem; `loss` is the robust loss of the measurement errors, may be null).
+using AddResiduals = std::function<void(ceres::Problem* problem, ceres::LossFunction* loss)>;
+
+// Outer loop: relinearise(); stop (after the first round) when nothing changed and, with
+// wait_for_line_delay, d moved by less than 0.1 %; else rebuild the problem and solve it
+// (DOGLEG, sparse normal Cholesky). Then, with estimate_line_delay and compute_covariance,
+// the standard deviation of d from Ceres' covariance (sparse QR; +inf if rank deficient);
+// 0 when d is not estimated. solve_time_s counts from `started`. Throws InputError when
+// Ceres fails.
+SolveResult SolveWithCovariance(const SolveSettings& settings, double* line_delay_s,
+                                std::chrono::steady_clock::time_point started,
+                                const Relinearise& relinearise, const AddResiduals& add_residuals);
+
+}  // namespace rscalib::rs::detail
