@@ -3,7 +3,7 @@
 # something is missing. Needs root (or sudo) on Debian/Ubuntu.
 set -euo pipefail
 
-packages=(g++ make libceres-dev libeigen3-dev libsuitesparse-dev libgtest-dev)
+packages=(g++ make libceres-dev libeigen3-dev libsuitesparse-dev libgtest-dev clang-format)
 python3 -c "import venv, ensurepip" 2>/dev/null || packages+=(python3-venv)
 command -v python3 >/dev/null || packages+=(python3 python3-dev python3-venv)
 

@@ -78,7 +78,8 @@ py::array_t<double> Unproject(const CameraModel& cam, const DoubleArray& pixels)
     py::gil_scoped_release release;
     for (py::ssize_t i = 0; i < count; ++i) {
       Eigen::Vector3d ray;
-      if (!cam.Unproject(Eigen::Map<const Eigen::Vector2d>(in + 2 * i), &ray)) ray.setConstant(kNaN);
+      if (!cam.Unproject(Eigen::Map<const Eigen::Vector2d>(in + 2 * i), &ray))
+        ray.setConstant(kNaN);
       Eigen::Map<Eigen::Vector3d>(dst + 3 * i) = ray;
     }
   }
@@ -126,21 +127,26 @@ Points that cannot be projected give NaN.
            py::arg("model"), py::arg("params"), py::arg("width"), py::arg("height"),
            py::arg("pixel_size_mm") = Eigen::Vector2d::Zero())
       .def_property_readonly("model", &CameraModel::name)
-      .def_property_readonly("params", [](const CameraModel& c) { return Eigen::VectorXd(c.params()); })
-      .def_property_readonly("param_names",
-                             [](const CameraModel& c) { return camera::CameraParamNames(c.type()); })
+      .def_property_readonly("params",
+                             [](const CameraModel& c) { return Eigen::VectorXd(c.params()); })
+      .def_property_readonly(
+          "param_names", [](const CameraModel& c) { return camera::CameraParamNames(c.type()); })
       .def_property_readonly("width", &CameraModel::width)
       .def_property_readonly("height", &CameraModel::height)
-      .def_property_readonly("pixel_size_mm",
-                             [](const CameraModel& c) { return Eigen::Vector2d(c.pixel_size_mm()); })
+      .def_property_readonly(
+          "pixel_size_mm", [](const CameraModel& c) { return Eigen::Vector2d(c.pixel_size_mm()); })
       .def("project", &Project, py::arg("points_c"), "(n, 3) camera-frame points -> (n, 2) pixels.")
       .def("project_with_jacobians", &ProjectWithJacobians, py::arg("points_c"),
            "-> (uv (n, 2), d_uv_d_point (n, 2, 3), d_uv_d_params (n, 2, num_params)).")
       .def("unproject", &Unproject, py::arg("uv"), "(n, 2) pixels -> (n, 3) rays with z = 1.")
-      .def("distort", [](const CameraModel& c, const DoubleArray& p) { return CiveraMap(c, p, true); },
-           py::arg("uv_undistorted"), "civera-radial: undistorted -> distorted pixels (Newton).")
-      .def("undistort", [](const CameraModel& c, const DoubleArray& p) { return CiveraMap(c, p, false); },
-           py::arg("uv_distorted"), "civera-radial: distorted -> undistorted pixels.")
+      .def(
+          "distort",
+          [](const CameraModel& c, const DoubleArray& p) { return CiveraMap(c, p, true); },
+          py::arg("uv_undistorted"), "civera-radial: undistorted -> distorted pixels (Newton).")
+      .def(
+          "undistort",
+          [](const CameraModel& c, const DoubleArray& p) { return CiveraMap(c, p, false); },
+          py::arg("uv_distorted"), "civera-radial: distorted -> undistorted pixels.")
       .def(py::pickle(
           [](const CameraModel& c) {
             return py::make_tuple(c.name(), Eigen::VectorXd(c.params()), c.width(), c.height(),

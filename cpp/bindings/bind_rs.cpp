@@ -121,9 +121,9 @@ void BindRs(py::module_& m) {
           throw InputError("span out of range");
         const auto basis = trajectory.PowerBasis(span);
         const rs::SpanCamera cam = rs::MakeSpanCamera(camera);
-        std::unique_ptr<ceres::CostFunction> cost(rs::RsReprojectionCost::Create(
-            basis, cam, frame_time_s - basis.span_start, uv.data(), point_w.data(),
-            sqrt_information));
+        std::unique_ptr<ceres::CostFunction> cost(
+            rs::RsReprojectionCost::Create(basis, cam, frame_time_s - basis.span_start, uv.data(),
+                                           point_w.data(), sqrt_information));
         const double* blocks[5];
         for (int j = 0; j < 4; ++j)
           blocks[j] = trajectory.control_points().data() + 6 * (span - 3 + j);

@@ -66,8 +66,8 @@ void BindRsLinear(py::module_& m) {
         LinearInterpSummary summary;
         {
           py::gil_scoped_release release;
-          summary = rs::SolveLineDelayLinear(obs, frame_time_s, camera, &frame_poses,
-                                             &line_delay_s, options);
+          summary = rs::SolveLineDelayLinear(obs, frame_time_s, camera, &frame_poses, &line_delay_s,
+                                             options);
         }
         return py::make_tuple(summary, frame_poses);
       },

@@ -55,18 +55,23 @@ Segment s is [breakpoints[s], breakpoints[s+1]); span = segment + 3 in the knot 
       .def_property_readonly("num_segments", &CubicBSpline::num_segments)
       .def_property_readonly("t_begin", &CubicBSpline::t_begin)
       .def_property_readonly("t_end", &CubicBSpline::t_end)
-      .def_property_readonly("knots", [](const CubicBSpline& s) {
-        return py::array_t<double>(static_cast<py::ssize_t>(s.knots().size()), s.knots().data());
-      })
-      .def_property_readonly("breakpoints", [](const CubicBSpline& s) {
-        const auto b = s.Breakpoints();
-        return py::array_t<double>(static_cast<py::ssize_t>(b.size()), b.data());
-      })
+      .def_property_readonly("knots",
+                             [](const CubicBSpline& s) {
+                               return py::array_t<double>(
+                                   static_cast<py::ssize_t>(s.knots().size()), s.knots().data());
+                             })
+      .def_property_readonly("breakpoints",
+                             [](const CubicBSpline& s) {
+                               const auto b = s.Breakpoints();
+                               return py::array_t<double>(static_cast<py::ssize_t>(b.size()),
+                                                          b.data());
+                             })
       .def_property(
           "control_points", [](const CubicBSpline& s) { return ControlPoints(s.control_points()); },
           [](CubicBSpline& s, const ControlPoints& c) {
             if (c.rows() != s.num_control_points() || c.cols() != s.dimension())
-              throw InputError("control_points must keep the shape (num_control_points, dimension)");
+              throw InputError(
+                  "control_points must keep the shape (num_control_points, dimension)");
             s.mutable_control_points() = c;
           },
           "(n, N) control points (a copy; assign to change them).")

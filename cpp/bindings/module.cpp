@@ -11,15 +11,17 @@ py::ssize_t CheckRows(const DoubleArray& array, py::ssize_t width, const char* w
   *was_vector = array.ndim() == 1;
   if (array.ndim() == 1 && array.shape(0) == width) return 1;
   if (array.ndim() == 2 && array.shape(1) == width) return array.shape(0);
-  throw InputError(std::string(what) + " must have shape (n, " + std::to_string(width) +
-                   ") or (" + std::to_string(width) + ",)");
+  throw InputError(std::string(what) + " must have shape (n, " + std::to_string(width) + ") or (" +
+                   std::to_string(width) + ",)");
 }
 
 }  // namespace rscalib::python
 
 PYBIND11_MODULE(_core, m) {
   namespace py = pybind11;
-  m.doc() = "C++ core of rscalib: B-spline trajectories, camera models, the rolling-shutter solver and the SOG filter bank.";
+  m.doc() =
+      "C++ core of rscalib: B-spline trajectories, camera models, the rolling-shutter solver and "
+      "the SOG filter bank.";
   m.attr("__version__") = RSCALIB_VERSION;
   py::register_exception<rscalib::InputError>(m, "InputError", PyExc_ValueError);
   rscalib::python::BindSpline(m);

@@ -41,15 +41,16 @@ std::vector<std::string> CameraParamNames(CameraModelType type) {
       return {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"};
     case CameraModelType::kPinholeEquidistant:
       return {"fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"};
-    case CameraModelType::kCiveraRadial:
-      return {"f", "cx", "cy", "k1", "k2"};
+    case CameraModelType::kCiveraRadial: return {"f", "cx", "cy", "k1", "k2"};
   }
   return {};
 }
 
 CameraModel::CameraModel(const std::string& model, const Eigen::VectorXd& params, int width,
                          int height, const Eigen::Vector2d& pixel_size_mm)
-    : type_(ParseCameraModelType(model)), width_(width), height_(height),
+    : type_(ParseCameraModelType(model)),
+      width_(width),
+      height_(height),
       pixel_size_mm_(pixel_size_mm) {
   const int expected = NumCameraParams(type_);
   const int given = static_cast<int>(params.size());
@@ -59,8 +60,7 @@ CameraModel::CameraModel(const std::string& model, const Eigen::VectorXd& params
   } else if (given == expected) {
     params_ = params;
   } else {
-    const std::string alternatives =
-        type_ == CameraModelType::kPinholeRadtan ? " (or 4 or 8)" : "";
+    const std::string alternatives = type_ == CameraModelType::kPinholeRadtan ? " (or 4 or 8)" : "";
     throw InputError(model + " takes " + std::to_string(expected) + " parameters" + alternatives +
                      ", got " + std::to_string(given));
   }
@@ -149,7 +149,8 @@ bool CameraModel::Unproject(const Eigen::Vector2d& uv, Eigen::Vector3d* ray) con
       double theta = theta_d;
       for (int iteration = 0; iteration < 100; ++iteration) {
         const double t2 = theta * theta;
-        const double g = theta * (1 + t2 * (p[4] + t2 * (p[5] + t2 * (p[6] + t2 * p[7])))) - theta_d;
+        const double g =
+            theta * (1 + t2 * (p[4] + t2 * (p[5] + t2 * (p[6] + t2 * p[7])))) - theta_d;
         const double dg = 1 + t2 * (3 * p[4] + t2 * (5 * p[5] + t2 * (7 * p[6] + t2 * 9 * p[7])));
         if (!(dg > 0.0)) return false;
         theta -= g / dg;

@@ -55,8 +55,8 @@ std::vector<Attachment> Attach(const RsObservations& obs, const camera::CameraMo
       continue;
     detail::SetWeightedError(obs.uv.row(m).transpose(), Eigen::Vector2d(uv[0].a, uv[1].a),
                              Eigen::Vector2d(uv[0].v[0], uv[1].v[0]), line_delay_s,
-                             options.standardise_errors, options.pixel_sigma,
-                             options.max_rs_gain, &e);
+                             options.standardise_errors, options.pixel_sigma, options.max_rs_gain,
+                             &e);
   }
   return out;
 }
@@ -137,9 +137,9 @@ RsSolveSummary EvaluateLineDelay(const RsObservations& observations,
   return summary;
 }
 
-RsSolveSummary SolveLineDelay(const RsObservations& observations,
-                              const camera::CameraModel& camera, spline::CubicBSpline* trajectory,
-                              double* line_delay_s, const RsSolverOptions& options) {
+RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::CameraModel& camera,
+                              spline::CubicBSpline* trajectory, double* line_delay_s,
+                              const RsSolverOptions& options) {
   Validate(observations, camera, *trajectory, options);
   const auto started = std::chrono::steady_clock::now();
   RsSolveSummary summary;

@@ -135,8 +135,8 @@ LinearInterpSummary SolveLineDelayLinear(const LinearInterpObservations& observa
   LinearInterpSummary summary;
   const SpanCamera cam = MakeSpanCamera(camera);
   const int num_frames = static_cast<int>(frame_time_s.size());
-  summary.max_frame_interval_s =
-      options.max_frame_interval_s > 0.0 ? options.max_frame_interval_s : AutoInterval(frame_time_s);
+  summary.max_frame_interval_s = options.max_frame_interval_s > 0.0 ? options.max_frame_interval_s
+                                                                    : AutoInterval(frame_time_s);
   std::vector<bool> linked_to_next(num_frames, false);
   for (int k = 0; k + 1 < num_frames; ++k) {
     linked_to_next[k] = frame_time_s[k + 1] - frame_time_s[k] <= summary.max_frame_interval_s;
@@ -148,8 +148,8 @@ LinearInterpSummary SolveLineDelayLinear(const LinearInterpObservations& observa
   std::vector<int> previous_first;
   // Re-choose every observation's pair (it depends on the sign of d).
   const auto repair = [&]() {
-    pairs = Pair(observations, frame_time_s, linked_to_next, cam, *frame_poses, *line_delay_s,
-                 options);
+    pairs =
+        Pair(observations, frame_time_s, linked_to_next, cam, *frame_poses, *line_delay_s, options);
     bool changed = previous_first.empty();
     for (size_t i = 0; i < previous_first.size(); ++i)
       changed |= pairs[i].first != previous_first[i];
@@ -180,8 +180,8 @@ LinearInterpSummary SolveLineDelayLinear(const LinearInterpObservations& observa
       detail::SolveWithCovariance(settings, line_delay_s, started, repair, add_residuals);
   result.CopyTo(&summary);
 
-  pairs = Pair(observations, frame_time_s, linked_to_next, cam, *frame_poses, *line_delay_s,
-               options);
+  pairs =
+      Pair(observations, frame_time_s, linked_to_next, cam, *frame_poses, *line_delay_s, options);
   FillStatistics(pairs, &summary);
   return summary;
 }

@@ -35,7 +35,7 @@ ceres::Solver::Options MakeSolverOptions(const SolveSettings& settings) {
   solver_options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
   solver_options.sparse_linear_algebra_library_type =
       ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE
-                                                                           : ceres::EIGEN_SPARSE;
+                                                                            : ceres::EIGEN_SPARSE;
   solver_options.num_threads = std::max(1, settings.num_threads);
   solver_options.max_num_iterations = settings.max_iterations;
   solver_options.function_tolerance = settings.function_tolerance;

@@ -23,7 +23,8 @@ void MirrorLower(Eigen::MatrixXd* p) {
 
 SelfCalibrationEkf::SelfCalibrationEkf(const Vector5d& calibration,
                                        const Matrix5d& calibration_covariance,
-                                       const MotionState& motion, const Matrix13d& motion_covariance)
+                                       const MotionState& motion,
+                                       const Matrix13d& motion_covariance)
     : x_(kCameraDim), p_(Eigen::MatrixXd::Zero(kCameraDim, kCameraDim)) {
   x_.head<5>() = calibration;
   x_.segment<13>(kPosition) = motion;
@@ -45,7 +46,8 @@ void SelfCalibrationEkf::Predict(double dt_s, const ProcessNoise& noise) {
   // Only the 13 motion rows/columns change: P <- F P F^T in O(13^2 n), not O(n^3).
   const Eigen::Matrix<double, 13, Eigen::Dynamic> rows = f * p_.middleRows<13>(kPosition);
   p_.middleRows<13>(kPosition) = rows;
-  const Eigen::Matrix<double, Eigen::Dynamic, 13> cols = p_.middleCols<13>(kPosition) * f.transpose();
+  const Eigen::Matrix<double, Eigen::Dynamic, 13> cols =
+      p_.middleCols<13>(kPosition) * f.transpose();
   p_.middleCols<13>(kPosition) = cols;
   p_.block<13, 13>(kPosition, kPosition) +=
       MotionProcessNoise(motion, dt_s, noise.accel_sigma, noise.angular_accel_sigma);
@@ -60,7 +62,8 @@ namespace {
 template <int D>
 Eigen::Matrix2d InnovationCovariance(const Eigen::MatrixXd& p, int offset,
                                      const Eigen::Matrix<double, 2, 12>& h_camera,
-                                     const Eigen::Matrix<double, 2, D>& h_feature, double variance) {
+                                     const Eigen::Matrix<double, 2, D>& h_feature,
+                                     double variance) {
   const Eigen::Matrix<double, 2, 12> a =
       h_camera * p.topLeftCorner<12, 12>() + h_feature * p.block<D, 12>(offset, 0);
   const Eigen::Matrix<double, 2, D> b =
@@ -74,16 +77,17 @@ Eigen::Matrix2d InnovationCovariance(const Eigen::MatrixXd& p, int offset,
 }  // namespace
 
 void SelfCalibrationEkf::PredictMeasurements(const FeatureMap& map, const std::vector<int>& indices,
-                                             const Eigen::Vector2d& pixel_size_mm, double pixel_sigma,
+                                             const Eigen::Vector2d& pixel_size_mm,
+                                             double pixel_sigma,
                                              std::vector<FeaturePrediction>* predictions) const {
   const MeasuredCamera camera = measured_camera();
   const double variance = pixel_sigma * pixel_sigma;
   for (int index : indices) {
     const MapFeature& feature = map[index];
     FeaturePrediction& out = (*predictions)[index];
-    out.valid = ProjectFeatureWithJacobians(camera, pixel_size_mm, feature.kind,
-                                            x_.data() + feature.offset, &out.uv,
-                                            &out.d_uv_d_camera, &out.d_uv_d_feature);
+    out.valid =
+        ProjectFeatureWithJacobians(camera, pixel_size_mm, feature.kind, x_.data() + feature.offset,
+                                    &out.uv, &out.d_uv_d_camera, &out.d_uv_d_feature);
     if (!out.valid) continue;
     if (feature.kind == FeatureKind::kInverseDepth)
       out.innovation_covariance = InnovationCovariance<6>(p_, feature.offset, out.d_uv_d_camera,
@@ -113,7 +117,8 @@ bool Linearise(const Eigen::VectorXd& x, const FeatureMap& map, const std::vecto
 
 // P H^T (n x m) and S = H P H^T + sigma^2 I for the sparse H of `predictions`: each pair of
 // rows touches the 12 calibration+pose columns and one feature's columns.
-void SparseInnovation(const Eigen::MatrixXd& p, const FeatureMap& map, const std::vector<int>& indices,
+void SparseInnovation(const Eigen::MatrixXd& p, const FeatureMap& map,
+                      const std::vector<int>& indices,
                       const std::vector<FeaturePrediction>& predictions, double pixel_sigma,
                       Eigen::MatrixXd* pht, Eigen::MatrixXd* s) {
   const int k = static_cast<int>(indices.size());
@@ -124,14 +129,16 @@ void SparseInnovation(const Eigen::MatrixXd& p, const FeatureMap& map, const std
     const FeaturePrediction& pr = predictions[j];
     const int d = FeatureDim(f.kind);
     pht->middleCols<2>(2 * j).noalias() = p.leftCols<12>() * pr.d_uv_d_camera.transpose();
-    pht->middleCols<2>(2 * j).noalias() += p.middleCols(f.offset, d) * pr.d_uv_d_feature.leftCols(d).transpose();
+    pht->middleCols<2>(2 * j).noalias() +=
+        p.middleCols(f.offset, d) * pr.d_uv_d_feature.leftCols(d).transpose();
   }
   for (int i = 0; i < k; ++i) {
     const MapFeature& f = map[indices[i]];
     const FeaturePrediction& pr = predictions[i];
     const int d = FeatureDim(f.kind);
     s->middleRows<2>(2 * i).noalias() = pr.d_uv_d_camera * pht->topRows<12>();
-    s->middleRows<2>(2 * i).noalias() += pr.d_uv_d_feature.leftCols(d) * pht->middleRows(f.offset, d);
+    s->middleRows<2>(2 * i).noalias() +=
+        pr.d_uv_d_feature.leftCols(d) * pht->middleRows(f.offset, d);
   }
   *s = 0.5 * (*s + s->transpose()).eval();
   s->diagonal().array() += pixel_sigma * pixel_sigma;
@@ -141,8 +148,9 @@ void SparseInnovation(const Eigen::MatrixXd& p, const FeatureMap& map, const std
 
 bool SelfCalibrationEkf::Update(const FeatureMap& map, const std::vector<int>& indices,
                                 const std::vector<FeaturePrediction>& predictions,
-                                const std::vector<Eigen::Vector2d>& z, const UpdateSettings& settings,
-                                double* log_likelihood, double* nis) {
+                                const std::vector<Eigen::Vector2d>& z,
+                                const UpdateSettings& settings, double* log_likelihood,
+                                double* nis) {
   const int k = static_cast<int>(indices.size());
   const int m = 2 * k;
   *log_likelihood = 0.0;
@@ -170,7 +178,8 @@ bool SelfCalibrationEkf::Update(const FeatureMap& map, const std::vector<int>& i
     const Eigen::VectorXd x_next = x_prior + pht * llt.solve(residual);
     const double step = (x_next - x_i).norm();
     std::vector<FeaturePrediction> next = lin;
-    if (!x_next.allFinite() || !Linearise(x_next, map, indices, settings.pixel_size_mm, &next)) break;
+    if (!x_next.allFinite() || !Linearise(x_next, map, indices, settings.pixel_size_mm, &next))
+      break;
     Eigen::MatrixXd pht_next, s_next;
     SparseInnovation(p_, map, indices, next, settings.pixel_sigma, &pht_next, &s_next);
     Eigen::LLT<Eigen::MatrixXd> llt_next(s_next);
@@ -207,7 +216,8 @@ void SelfCalibrationEkf::NormaliseQuaternion() {
   x_.segment<4>(kQuaternion) = unit;
   const Eigen::Matrix<double, 4, Eigen::Dynamic> rows = j * p_.middleRows<4>(kQuaternion);
   p_.middleRows<4>(kQuaternion) = rows;
-  const Eigen::Matrix<double, Eigen::Dynamic, 4> cols = p_.middleCols<4>(kQuaternion) * j.transpose();
+  const Eigen::Matrix<double, Eigen::Dynamic, 4> cols =
+      p_.middleCols<4>(kQuaternion) * j.transpose();
   p_.middleCols<4>(kQuaternion) = cols;
 }
 

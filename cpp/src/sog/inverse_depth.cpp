@@ -9,7 +9,8 @@
 
 namespace rscalib::sog {
 
-Eigen::Vector3d InverseDepthToXyz(const InverseDepthPoint& y, Eigen::Matrix<double, 3, 6>* d_xyz_d_y) {
+Eigen::Vector3d InverseDepthToXyz(const InverseDepthPoint& y,
+                                  Eigen::Matrix<double, 3, 6>* d_xyz_d_y) {
   const double theta = y[3], phi = y[4], rho = y[5];
   const Eigen::Vector3d m = DirectionFromAngles(theta, phi);
   if (d_xyz_d_y != nullptr) {
@@ -60,8 +61,10 @@ InverseDepthPoint InitialiseInverseDepth(const Eigen::Matrix<double, 12, 1>& cam
 
   const double h2 = xz2 + h[1] * h[1];
   Eigen::Matrix<double, 2, 3> d_angles_d_h;
+  // clang-format off
   d_angles_d_h << h[2] / xz2, 0.0, -h[0] / xz2,
                   h[0] * h[1] / (xz * h2), -xz / h2, h[2] * h[1] / (xz * h2);
+  // clang-format on
   const Eigen::Matrix<double, 2, 3> d_angles_d_ray = d_angles_d_h * QuaternionToRotation<double>(q);
   // ray = ((U(uv_d - C) ) / f, 1): only its first two entries vary.
   Eigen::Matrix2d d_u_d_offset, d_u_d_k;

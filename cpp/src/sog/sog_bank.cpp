@@ -106,7 +106,8 @@ int SogBank::leading_gaussian() const {
 void SogBank::SetCameraState(const MotionState& state, const Matrix13d& covariance) {
   if (!state.allFinite() || !covariance.allFinite())
     throw InputError("SogBank: camera state must be finite");
-  for (SelfCalibrationEkf& f : filters_) f.SetMotionState(state, 0.5 * (covariance + covariance.transpose()));
+  for (SelfCalibrationEkf& f : filters_)
+    f.SetMotionState(state, 0.5 * (covariance + covariance.transpose()));
   predicted_.assign(map_.size(), false);
 }
 
@@ -178,7 +179,8 @@ SogUpdateReport SogBank::Update(const std::vector<int64_t>& ids,
   std::vector<int> indices(rows);
   for (size_t r = 0; r < rows; ++r) {
     indices[r] = map_.IndexOf(ids[r]);
-    if (indices[r] < 0) throw InputError("SogBank.update: unknown feature id " + std::to_string(ids[r]));
+    if (indices[r] < 0)
+      throw InputError("SogBank.update: unknown feature id " + std::to_string(ids[r]));
     for (size_t s = 0; s < r; ++s)
       if (indices[s] == indices[r]) throw InputError("SogBank.update: repeated feature id");
   }
@@ -252,9 +254,10 @@ SogUpdateReport SogBank::Update(const std::vector<int64_t>& ids,
     const int lead = leading_gaussian();
     if (!pruning_active_) {
       const double sigma_f = std::sqrt(filters_[lead].covariance()(0, 0));
-      pruning_active_ = frame_ >= options_.guard_min_frames &&
-                        accumulated_rotation_rad_ >= options_.guard_min_rotation_deg * M_PI / 180.0 &&
-                        sigma_f <= options_.guard_f_sigma_ratio * initial_f_sigma_[lead];
+      pruning_active_ =
+          frame_ >= options_.guard_min_frames &&
+          accumulated_rotation_rad_ >= options_.guard_min_rotation_deg * M_PI / 180.0 &&
+          sigma_f <= options_.guard_f_sigma_ratio * initial_f_sigma_[lead];
     }
     if (pruning_active_) {
       const WaldBoundaries wald = MakeWaldBoundaries(options_.sprt_alpha, options_.sprt_beta);
@@ -287,7 +290,8 @@ void SogBank::MergeConverged(std::vector<bool>* remove, SogUpdateReport* report)
   if (!(options_.merge_mahalanobis2 > 0.0)) return;
   std::vector<int> order(num_gaussians());
   for (int i = 0; i < num_gaussians(); ++i) order[i] = i;
-  std::sort(order.begin(), order.end(), [&](int a, int b) { return log_weights_[a] > log_weights_[b]; });
+  std::sort(order.begin(), order.end(),
+            [&](int a, int b) { return log_weights_[a] > log_weights_[b]; });
   for (size_t a = 0; a < order.size(); ++a) {
     const int i = order[a];
     if ((*remove)[i]) continue;
@@ -295,12 +299,15 @@ void SogBank::MergeConverged(std::vector<bool>* remove, SogUpdateReport* report)
       const int j = order[b];
       if ((*remove)[j]) continue;
       const Vector5d d = filters_[i].calibration() - filters_[j].calibration();
-      const Matrix5d c = filters_[i].calibration_covariance() + filters_[j].calibration_covariance();
+      const Matrix5d c =
+          filters_[i].calibration_covariance() + filters_[j].calibration_covariance();
       const Eigen::LDLT<Matrix5d> ldlt(c);
-      if (ldlt.info() != Eigen::Success || !(d.dot(ldlt.solve(d)) < options_.merge_mahalanobis2)) continue;
+      if (ldlt.info() != Eigen::Success || !(d.dot(ldlt.solve(d)) < options_.merge_mahalanobis2))
+        continue;
       (*remove)[j] = true;
       const double hi = std::max(log_weights_[i], log_weights_[j]);
-      log_weights_[i] = hi + std::log(std::exp(log_weights_[i] - hi) + std::exp(log_weights_[j] - hi));
+      log_weights_[i] =
+          hi + std::log(std::exp(log_weights_[i] - hi) + std::exp(log_weights_[j] - hi));
       log_weights_[j] = -kInf;
       report->merged_gaussian_ids.push_back(gaussian_ids_[j]);
     }
@@ -335,7 +342,8 @@ void SogBank::Prune(const std::vector<bool>& remove, SogUpdateReport* report) {
   initial_f_sigma_.swap(sigma0);
   log_weights_ = Eigen::Map<Eigen::VectorXd>(log_w.data(), static_cast<Eigen::Index>(log_w.size()));
   log_weights_.array() -= LogSumExp(log_weights_);
-  sprt_statistic_ = Eigen::Map<Eigen::VectorXd>(stat.data(), static_cast<Eigen::Index>(stat.size()));
+  sprt_statistic_ =
+      Eigen::Map<Eigen::VectorXd>(stat.data(), static_cast<Eigen::Index>(stat.size()));
   sprt_accepted_.swap(accepted);
   predictions_.swap(predictions);
 }
@@ -358,8 +366,8 @@ void SogBank::ManageMap(SogUpdateReport* report) {
         const MapFeature& f = map_[k];
         if (remove[k] || f.kind != FeatureKind::kInverseDepth) continue;
         const int rho = f.offset + 5;
-        index[i][k] = LinearityIndex(filter.mean().segment<6>(f.offset),
-                                     filter.covariance()(rho, rho), r);
+        index[i][k] =
+            LinearityIndex(filter.mean().segment<6>(f.offset), filter.covariance()(rho, rho), r);
       }
     });
     for (int k = 0; k < count; ++k) {
@@ -407,7 +415,8 @@ void SogBank::RemoveFeatures(const std::vector<int64_t>& ids) {
   std::vector<bool> remove(map_.size(), false), convert(map_.size(), false);
   for (int64_t id : ids) {
     const int k = map_.IndexOf(id);
-    if (k < 0) throw InputError("SogBank.remove_features: unknown feature id " + std::to_string(id));
+    if (k < 0)
+      throw InputError("SogBank.remove_features: unknown feature id " + std::to_string(id));
     remove[k] = true;
   }
   Restructure(remove, convert);

@@ -69,8 +69,8 @@ int CubicBSpline::SpanAt(double t) const {
   if (!(t >= t_begin() - tolerance && t <= t_end() + tolerance)) {
     std::ostringstream message;
     message.precision(17);
-    message << "time " << t << " s is outside the spline domain [" << t_begin() << ", "
-            << t_end() << "] s";
+    message << "time " << t << " s is outside the spline domain [" << t_begin() << ", " << t_end()
+            << "] s";
     throw InputError(message.str());
   }
   return FindSpan(knots_.data(), num_control_points(), t);
@@ -82,8 +82,7 @@ Eigen::VectorXd CubicBSpline::Evaluate(double t, int derivative) const {
   return out;
 }
 
-void CubicBSpline::EvaluateMany(const double* times, int count, int derivative,
-                                double* out) const {
+void CubicBSpline::EvaluateMany(const double* times, int count, int derivative, double* out) const {
   if (derivative < 0 || derivative > 3) throw InputError("derivative order must be 0..3");
   const int dim = dimension();
   double ders[4][4];

@@ -52,7 +52,8 @@ TEST(CameraModel, JacobiansMatchCentralDifferences) {
         Eigen::Vector2d up, um;
         cp.Project(point, &up);
         cm.Project(point, &um);
-        EXPECT_LT(((up - um) / (2 * h) - d_params.col(i)).norm(), 1e-5 * (1 + d_params.col(i).norm()))
+        EXPECT_LT(((up - um) / (2 * h) - d_params.col(i)).norm(),
+                  1e-5 * (1 + d_params.col(i).norm()))
             << camera.name() << " param " << i;
       }
     }
@@ -93,6 +94,8 @@ TEST(CameraModel, CiveraDistortUndistortRoundTrip) {
 
 TEST(CameraModel, RejectsBadParameters) {
   EXPECT_THROW(CameraModel("pinhole", Eigen::VectorXd::Ones(4), 640, 480), rscalib::InputError);
-  EXPECT_THROW(CameraModel("pinhole-radtan", Eigen::VectorXd::Ones(6), 640, 480), rscalib::InputError);
-  EXPECT_THROW(CameraModel("civera-radial", Eigen::VectorXd::Ones(5), 320, 240), rscalib::InputError);
+  EXPECT_THROW(CameraModel("pinhole-radtan", Eigen::VectorXd::Ones(6), 640, 480),
+               rscalib::InputError);
+  EXPECT_THROW(CameraModel("civera-radial", Eigen::VectorXd::Ones(5), 320, 240),
+               rscalib::InputError);
 }

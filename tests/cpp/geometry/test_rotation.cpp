@@ -16,7 +16,8 @@ TEST(Rotation, UnwrapRemovesTwoPiJumps) {
   Eigen::MatrixX3d wrapped(count, 3);
   for (int k = 0; k < count; ++k) {
     const double angle = 2.5 + 0.05 * k;  // 2.5 .. 5.45 rad
-    const Eigen::Matrix3d rotation = Eigen::AngleAxisd(angle, Eigen::Vector3d(0.1, 0.2, 1).normalized()).toRotationMatrix();
+    const Eigen::Matrix3d rotation =
+        Eigen::AngleAxisd(angle, Eigen::Vector3d(0.1, 0.2, 1).normalized()).toRotationMatrix();
     wrapped.row(k) = RotationMatrixToVector(rotation).transpose();
   }
   const Eigen::MatrixX3d unwrapped = UnwrapRotationVectors(wrapped);

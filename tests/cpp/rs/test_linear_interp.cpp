@@ -55,7 +55,8 @@ TEST(LinearInterpCost, AutodiffMatchesNumericDiffIncludingLineDelay) {
         rs::LinearInterpCost::Create(span_camera, frame_offset_s, interval_s, uv, point_w, weight));
     std::unique_ptr<ceres::CostFunction> numeric(
         new ceres::NumericDiffCostFunction<rs::LinearInterpCost, ceres::CENTRAL, 2, 6, 6, 1>(
-            new rs::LinearInterpCost(span_camera, frame_offset_s, interval_s, uv, point_w, weight)));
+            new rs::LinearInterpCost(span_camera, frame_offset_s, interval_s, uv, point_w,
+                                     weight)));
     double line_delay = 40e-6;
     const double* blocks[3] = {pose_a.data(), pose_b.data(), &line_delay};
     double r_a[2], r_n[2];
@@ -106,8 +107,8 @@ TEST(LinearInterpCost, JetAndDoubleAgreeAndFollowTheGeodesic) {
   const Eigen::Vector3d log_rel = geometry::RotationMatrixToVector(r_a.transpose() * r_b);
   const Eigen::Vector3d s_log = s * log_rel;
   const Eigen::Matrix3d r_s = r_a * geometry::RotationVectorToMatrix(s_log.data());
-  const Eigen::Vector3d c_s = (1 - s) * (-r_a.transpose() * pose_a.head<3>()) +
-                              s * (-r_b.transpose() * pose_b.head<3>());
+  const Eigen::Vector3d c_s =
+      (1 - s) * (-r_a.transpose() * pose_a.head<3>()) + s * (-r_b.transpose() * pose_b.head<3>());
   EXPECT_LT((Rotation(state) - r_s).norm(), 1e-12);
   EXPECT_LT((state.head<3>() + r_s * c_s).norm(), 1e-12);
 }
@@ -138,7 +139,8 @@ TEST(LinearInterpSolver, RecoversLineDelayFromConstantVelocityMotion) {
   const auto cam = TestCamera();
   const double fps = 30.0, d_true = 30e-6;
   const int num_frames = 12;
-  const Eigen::Vector3d omega(0.8, -0.6, 0.2), centre0(0.1, 0.08, -0.55), velocity(0.15, -0.1, 0.05);
+  const Eigen::Vector3d omega(0.8, -0.6, 0.2), centre0(0.1, 0.08, -0.55),
+      velocity(0.15, -0.1, 0.05);
   const Eigen::Matrix3d r0 = Eigen::Matrix3d::Identity();
   auto pose_at = [&](double t) {
     const Eigen::Vector3d phi = omega * t;

@@ -63,7 +63,8 @@ TEST(RsReprojectionCost, AutodiffMatchesNumericDiffIncludingLineDelay) {
   EXPECT_NEAR(r_a[1], r_n[1], 1e-12);
   for (int b = 0; b < 5; ++b)
     for (size_t k = 0; k < j_a[b].size(); ++k)
-      EXPECT_NEAR(j_a[b][k], j_n[b][k], 1e-5 * (1.0 + std::abs(j_a[b][k]))) << "block " << b << " entry " << k;
+      EXPECT_NEAR(j_a[b][k], j_n[b][k], 1e-5 * (1.0 + std::abs(j_a[b][k])))
+          << "block " << b << " entry " << k;
   // d r / d d is not zero: the line delay is observable through the spline's time derivative.
   EXPECT_GT(std::abs(j_a[4][0]) + std::abs(j_a[4][1]), 1.0);
 }
@@ -74,7 +75,8 @@ TEST(MotionPriorCost, EqualsTheIntegralOfWeightedSquaredAcceleration) {
   Eigen::Matrix<double, 6, 1> q;
   q << 1.0, 2.0, 0.5, 10.0, 20.0, 5.0;
   for (int span = 3; span < curve.num_control_points(); ++span) {
-    std::unique_ptr<ceres::CostFunction> cost(rs::MotionPriorCost::Create(curve.knots().data(), span, q));
+    std::unique_ptr<ceres::CostFunction> cost(
+        rs::MotionPriorCost::Create(curve.knots().data(), span, q));
     const double* blocks[4];
     for (int j = 0; j < 4; ++j) blocks[j] = curve.control_points().data() + 6 * (span - 3 + j);
     double r[12];
@@ -98,9 +100,10 @@ TEST(ErrorStandardisation, WhitensTheErrorCovariance) {
   const Eigen::Vector2d velocity(900.0, -2500.0);
   const Eigen::Matrix2d a = rs::ErrorNoiseMap(d, velocity);
   const auto w = rs::ComputeStandardisationWeight(d, velocity, sigma, 0.8);
-  const Eigen::Matrix2d whitened = w.sqrt_information * (sigma * sigma * a * a.transpose()) *
-                                   w.sqrt_information.transpose();
+  const Eigen::Matrix2d whitened =
+      w.sqrt_information * (sigma * sigma * a * a.transpose()) * w.sqrt_information.transpose();
   EXPECT_LT((whitened - Eigen::Matrix2d::Identity()).norm(), 1e-12);
   EXPECT_FALSE(w.clamped);
-  EXPECT_TRUE(rs::ComputeStandardisationWeight(d, Eigen::Vector2d(0.0, 20000.0), sigma, 0.8).clamped);
+  EXPECT_TRUE(
+      rs::ComputeStandardisationWeight(d, Eigen::Vector2d(0.0, 20000.0), sigma, 0.8).clamped);
 }

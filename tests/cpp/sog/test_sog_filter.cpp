@@ -127,7 +127,8 @@ TEST(SogWeights, LogSpaceStaysFiniteFor200DimensionalInnovations) {
     const Eigen::VectorXd nu = Eigen::VectorXd::Constant(dim, 3.0 * s);
     double log_density = 0.0;
     ASSERT_TRUE(LogGaussianDensity(nu, cov, &log_density));
-    const double expected = -0.5 * (dim * 9.0 + 2.0 * dim * std::log(s) + dim * std::log(2.0 * M_PI));
+    const double expected =
+        -0.5 * (dim * 9.0 + 2.0 * dim * std::log(s) + dim * std::log(2.0 * M_PI));
     EXPECT_NEAR(log_density, expected, 1e-9 * std::abs(expected));
   }
   // Weights of two filters whose likelihoods differ by e^-2000 (zero in linear space).
@@ -201,11 +202,13 @@ TEST(SogEkf, PredictEqualsDenseFPFt) {
   Eigen::MatrixXd f = Eigen::MatrixXd::Identity(n, n);
   f.block<13, 13>(kPosition, kPosition) = f13;
   Eigen::MatrixXd q = Eigen::MatrixXd::Zero(n, n);
-  q.block<13, 13>(kPosition, kPosition) =
-      MotionProcessNoise(x0.segment<13>(kPosition), dt, noise.accel_sigma, noise.angular_accel_sigma);
+  q.block<13, 13>(kPosition, kPosition) = MotionProcessNoise(
+      x0.segment<13>(kPosition), dt, noise.accel_sigma, noise.angular_accel_sigma);
   q(0, 0) = 0.01 * dt;
   EXPECT_LT((ekf.covariance() - (f * p0 * f.transpose() + q)).norm(), 1e-12 * p0.norm());
-  EXPECT_LT((ekf.mean().segment<13>(kPosition) - PredictMotion(x0.segment<13>(kPosition), dt)).norm(), 1e-15);
+  EXPECT_LT(
+      (ekf.mean().segment<13>(kPosition) - PredictMotion(x0.segment<13>(kPosition), dt)).norm(),
+      1e-15);
   EXPECT_EQ(ekf.mean().tail(n - kCameraDim), x0.tail(n - kCameraDim));
 }
 
@@ -265,7 +268,8 @@ TEST(SogEkf, IteratedUpdateEqualsDenseGaussNewton) {
   std::vector<FeaturePrediction> predictions(map.size());
   ekf.PredictMeasurements(map, all, kPixelMm, 0.5, &predictions);
   std::vector<Eigen::Vector2d> z;
-  for (int k : all) z.push_back(predictions[k].uv + Eigen::Vector2d(3.0 * std::cos(k), 3.0 * std::sin(k)));
+  for (int k : all)
+    z.push_back(predictions[k].uv + Eigen::Vector2d(3.0 * std::cos(k), 3.0 * std::sin(k)));
   const int n = ekf.dim(), m = 2 * map.size();
   const Eigen::VectorXd x0 = ekf.mean();
   const Eigen::MatrixXd p0 = ekf.covariance();
@@ -279,7 +283,8 @@ TEST(SogEkf, IteratedUpdateEqualsDenseGaussNewton) {
     for (int k : all) {
       const MapFeature& f = map[k];
       ASSERT_TRUE(ProjectFeatureWithJacobians(at.head<12>(), kPixelMm, f.kind, at.data() + f.offset,
-                                              &lin[k].uv, &lin[k].d_uv_d_camera, &lin[k].d_uv_d_feature));
+                                              &lin[k].uv, &lin[k].d_uv_d_camera,
+                                              &lin[k].d_uv_d_feature));
       hx.segment<2>(2 * k) = lin[k].uv;
     }
     h = DenseH(map, all, lin, n);
@@ -325,7 +330,8 @@ TEST(SogEkf, AddingFeaturesEqualsDenseJacobianPropagation) {
   const Eigen::VectorXd x0 = ekf.mean();
   const Eigen::MatrixXd p0 = ekf.covariance();
   const int n = ekf.dim();
-  const std::vector<Eigen::Vector2d> uv = {Eigen::Vector2d(100.0, 60.0), Eigen::Vector2d(250.0, 200.0)};
+  const std::vector<Eigen::Vector2d> uv = {Eigen::Vector2d(100.0, 60.0),
+                                           Eigen::Vector2d(250.0, 200.0)};
   const double rho0 = 0.4, rho_sigma = 0.6, pixel_sigma = 0.8;
   ASSERT_TRUE(ekf.AddInverseDepthFeatures(uv, kPixelMm, rho0, rho_sigma, pixel_sigma));
   // Dense: y_new = g(x_camera, uv, rho); P_aug = J [P 0 0; 0 R 0; 0 0 s^2] J^T.
@@ -339,7 +345,8 @@ TEST(SogEkf, AddingFeaturesEqualsDenseJacobianPropagation) {
   for (int i = 0; i < 2; ++i) {
     Eigen::Matrix<double, 6, 12> jc;
     Eigen::Matrix<double, 6, 2> juv;
-    const InverseDepthPoint y = InitialiseInverseDepth(x0.head<12>(), kPixelMm, uv[i], rho0, &jc, &juv);
+    const InverseDepthPoint y =
+        InitialiseInverseDepth(x0.head<12>(), kPixelMm, uv[i], rho0, &jc, &juv);
     EXPECT_LT((ekf.mean().segment<6>(n + 6 * i) - y).norm(), 1e-15);
     j.block<6, 12>(n + 6 * i, 0) = jc;
     j.block<6, 2>(n + 6 * i, n + 2 * i) = juv;
@@ -393,8 +400,8 @@ TEST(SogBank, MergedPredictionsAreMomentMatchedFilterPredictions) {
   const std::vector<Matrix5d> covs(3, PaperCalibrationCovariance());
   SogBank bank(options, means, covs, {0.2, 0.5, 0.3}, 320, 240, kPixelMm);
   bank.SetCameraState(StartMotion(), StartMotionCovariance());
-  const std::vector<int64_t> ids = bank.AddFeatures({Eigen::Vector2d(100, 80), Eigen::Vector2d(200, 150),
-                                                     Eigen::Vector2d(160, 120)});
+  const std::vector<int64_t> ids = bank.AddFeatures(
+      {Eigen::Vector2d(100, 80), Eigen::Vector2d(200, 150), Eigen::Vector2d(160, 120)});
   ASSERT_EQ(ids.size(), 3u);
   bank.Predict(1.0 / 30.0);
   const MergedPredictions merged = bank.PredictMeasurements();
@@ -425,8 +432,10 @@ TEST(SogBank, RejectsBadInput) {
   const std::vector<Matrix5d> covs(1, PaperCalibrationCovariance());
   EXPECT_THROW(SogBank(options, means, covs, {1.0, 2.0}, 320, 240, kPixelMm), rscalib::InputError);
   EXPECT_THROW(SogBank(options, means, covs, {1.0}, 0, 240, kPixelMm), rscalib::InputError);
-  EXPECT_THROW(SogBank(options, means, covs, {1.0}, 320, 240, Eigen::Vector2d::Zero()), rscalib::InputError);
-  EXPECT_THROW(SogBank(options, means, {Matrix5d::Zero()}, {1.0}, 320, 240, kPixelMm), rscalib::InputError);
+  EXPECT_THROW(SogBank(options, means, covs, {1.0}, 320, 240, Eigen::Vector2d::Zero()),
+               rscalib::InputError);
+  EXPECT_THROW(SogBank(options, means, {Matrix5d::Zero()}, {1.0}, 320, 240, kPixelMm),
+               rscalib::InputError);
   SogBank bank(options, means, covs, {1.0}, 320, 240, kPixelMm);
   EXPECT_THROW(bank.Update({42}, {Eigen::Vector2d(1, 1)}, {true}), rscalib::InputError);
   EXPECT_THROW(bank.Predict(-1.0), rscalib::InputError);

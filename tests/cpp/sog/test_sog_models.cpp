@@ -61,9 +61,10 @@ MeasuredCamera RandomCamera(std::mt19937& rng) {
 
 // An inverse-depth feature in front of `camera`, through a random pixel, anchored elsewhere.
 InverseDepthPoint FeatureInFront(const MeasuredCamera& camera, std::mt19937& rng) {
-  std::uniform_real_distribution<double> u(20.0, 300.0), v(20.0, 220.0), depth(0.3, 2.0), off(-0.3, 0.3);
-  const InverseDepthPoint seen = InitialiseInverseDepth(camera, kPixelMm, Eigen::Vector2d(u(rng), v(rng)),
-                                                        1.0 / depth(rng));
+  std::uniform_real_distribution<double> u(20.0, 300.0), v(20.0, 220.0), depth(0.3, 2.0),
+      off(-0.3, 0.3);
+  const InverseDepthPoint seen =
+      InitialiseInverseDepth(camera, kPixelMm, Eigen::Vector2d(u(rng), v(rng)), 1.0 / depth(rng));
   const Eigen::Vector3d point = InverseDepthToXyz(seen);
   // Re-anchor at a nearby origin so that r != (x0, y0, z0).
   InverseDepthPoint y;
@@ -86,7 +87,9 @@ TEST(SogQuaternion, ProductMatricesAndRotation) {
     EXPECT_LT((QuaternionRightMatrix(q) * p - pq).norm(), 1e-14);
     // R(p ⊗ q) = R(p) R(q), and R of a unit quaternion is a rotation.
     EXPECT_LT((QuaternionToRotation<double>(pq) -
-               QuaternionToRotation<double>(p) * QuaternionToRotation<double>(q)).norm(), 1e-13);
+               QuaternionToRotation<double>(p) * QuaternionToRotation<double>(q))
+                  .norm(),
+              1e-13);
     const Eigen::Matrix3d r = QuaternionToRotation<double>(p);
     EXPECT_LT((r * r.transpose() - Eigen::Matrix3d::Identity()).norm(), 1e-13);
     EXPECT_NEAR(r.determinant(), 1.0, 1e-13);
@@ -130,7 +133,8 @@ TEST(SogMotionModel, JacobiansMatchFiniteDifferences) {
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (int trial = 0; trial < 10; ++trial) {
     MotionState x;
-    x << u(rng), u(rng), u(rng), 0, 0, 0, 0, u(rng), u(rng), u(rng), 2 * u(rng), 2 * u(rng), 2 * u(rng);
+    x << u(rng), u(rng), u(rng), 0, 0, 0, 0, u(rng), u(rng), u(rng), 2 * u(rng), 2 * u(rng),
+        2 * u(rng);
     x.segment<4>(3) = RandomQuaternion(rng);
     if (trial == 0) x.tail<3>().setZero();  // the series branch of the exponential
     const double dt = 1.0 / 30.0;
@@ -159,7 +163,7 @@ TEST(SogMotionModel, ConstantVelocityKinematicsAndNoise) {
   MotionState y = x;
   for (int i = 0; i < 30; ++i) y = PredictMotion(y, 1.0 / 30.0);
   EXPECT_LT((y.head<3>() - x.segment<3>(7)).norm(), 1e-12);  // 1 s at v
-  const Eigen::Vector3d expected_phi(0.0, 0.6, 0.0);  // 1 s at w
+  const Eigen::Vector3d expected_phi(0.0, 0.6, 0.0);         // 1 s at w
   const Eigen::Vector4d q = y.segment<4>(3);
   EXPECT_NEAR(2.0 * std::atan2(q.tail<3>().norm(), q[0]), 0.6, 1e-12);
   EXPECT_NEAR(q[2] / q.tail<3>().norm(), 1.0, 1e-12);
@@ -176,7 +180,8 @@ TEST(SogInverseDepth, ConversionJacobianAndLinearityIndex) {
   y << 0.1, -0.2, 0.3, 0.4, -0.3, 0.7;
   Eigen::Matrix<double, 3, 6> j;
   const Eigen::Vector3d x = InverseDepthToXyz(y, &j);
-  const Eigen::Vector3d m(std::cos(-0.3) * std::sin(0.4), -std::sin(-0.3), std::cos(-0.3) * std::cos(0.4));
+  const Eigen::Vector3d m(std::cos(-0.3) * std::sin(0.4), -std::sin(-0.3),
+                          std::cos(-0.3) * std::cos(0.4));
   EXPECT_LT((x - (y.head<3>() + m / 0.7)).norm(), 1e-15);
   const auto fn = [](const Eigen::VectorXd& s) -> Eigen::VectorXd {
     return InverseDepthToXyz(InverseDepthPoint(s));
@@ -200,12 +205,13 @@ TEST(SogMeasurement, ValueMatchesCameraModelAndJet) {
     Eigen::Vector2d uv_id, uv_xyz, uv_ref, uv_template;
     ASSERT_TRUE(ProjectFeatureWithJacobians(camera, kPixelMm, FeatureKind::kInverseDepth, y.data(),
                                             &uv_id, nullptr, nullptr));
-    ASSERT_TRUE(ProjectFeatureWithJacobians(camera, kPixelMm, FeatureKind::kXyz, xyz.data(), &uv_xyz,
-                                            nullptr, nullptr));
+    ASSERT_TRUE(ProjectFeatureWithJacobians(camera, kPixelMm, FeatureKind::kXyz, xyz.data(),
+                                            &uv_xyz, nullptr, nullptr));
     ASSERT_TRUE(ProjectFeature(camera.data(), kPixelMm.data(), FeatureKind::kInverseDepth, y.data(),
                                uv_template.data()));
     // Independent path: world -> camera by conventions.md, then the camera model.
-    const Eigen::Matrix3d r_wc = QuaternionToRotation<double>(Eigen::Vector4d(camera.segment<4>(8)));
+    const Eigen::Matrix3d r_wc =
+        QuaternionToRotation<double>(Eigen::Vector4d(camera.segment<4>(8)));
     const Eigen::Vector3d point_c = r_wc.transpose() * (xyz - camera.segment<3>(5));
     const rscalib::camera::CameraModel model("civera-radial", camera.head<5>(), 320, 240, kPixelMm);
     ASSERT_TRUE(model.Project(point_c, &uv_ref));
@@ -253,7 +259,8 @@ TEST(SogMeasurement, JacobiansMatchFiniteDifferencesAndAutodiff) {
       for (int row = 0; row < 2; ++row) {
         EXPECT_NEAR(uvj[row].a, uv[row], 1e-9);
         for (int i = 0; i < 12; ++i)
-          EXPECT_NEAR(uvj[row].v[i], d_uv_d_camera(row, i), 1e-8 * (1 + std::abs(d_uv_d_camera(row, i))));
+          EXPECT_NEAR(uvj[row].v[i], d_uv_d_camera(row, i),
+                      1e-8 * (1 + std::abs(d_uv_d_camera(row, i))));
         for (int i = 0; i < d; ++i)
           EXPECT_NEAR(uvj[row].v[12 + i], d_uv_d_feature(row, i),
                       1e-8 * (1 + std::abs(d_uv_d_feature(row, i))));
@@ -279,7 +286,8 @@ TEST(SogInverseDepth, InitialisationReprojectsAndJacobiansMatch) {
     const Eigen::Vector2d pixel(u(rng), v(rng));
     Eigen::Matrix<double, 6, 12> d_y_d_camera;
     Eigen::Matrix<double, 6, 2> d_y_d_uv;
-    const InverseDepthPoint y = InitialiseInverseDepth(camera, kPixelMm, pixel, 0.5, &d_y_d_camera, &d_y_d_uv);
+    const InverseDepthPoint y =
+        InitialiseInverseDepth(camera, kPixelMm, pixel, 0.5, &d_y_d_camera, &d_y_d_uv);
     EXPECT_LT((y.head<3>() - camera.segment<3>(5)).norm(), 1e-15);
     EXPECT_EQ(y[5], 0.5);
     // Any depth along the ray projects back onto the pixel.
@@ -287,8 +295,8 @@ TEST(SogInverseDepth, InitialisationReprojectsAndJacobiansMatch) {
       InverseDepthPoint yy = y;
       yy[5] = rho;
       Eigen::Vector2d back;
-      ASSERT_TRUE(ProjectFeatureWithJacobians(camera, kPixelMm, FeatureKind::kInverseDepth, yy.data(),
-                                              &back, nullptr, nullptr));
+      ASSERT_TRUE(ProjectFeatureWithJacobians(camera, kPixelMm, FeatureKind::kInverseDepth,
+                                              yy.data(), &back, nullptr, nullptr));
       EXPECT_LT((back - pixel).norm(), 1e-9);
     }
     const auto by_camera = [&](const Eigen::VectorXd& c) -> Eigen::VectorXd {
@@ -305,8 +313,8 @@ TEST(SogInverseDepth, InitialisationReprojectsAndJacobiansMatch) {
 
 TEST(SogDistortion, OffsetJacobiansMatchFiniteDifferences) {
   const double k1 = 0.06333, k2 = 0.0139;
-  for (const Eigen::Vector2d& offset : {Eigen::Vector2d(0.0, 0.0), Eigen::Vector2d(120.0, -80.0),
-                                        Eigen::Vector2d(-30.0, 5.0)}) {
+  for (const Eigen::Vector2d& offset :
+       {Eigen::Vector2d(0.0, 0.0), Eigen::Vector2d(120.0, -80.0), Eigen::Vector2d(-30.0, 5.0)}) {
     Eigen::Vector2d out;
     Eigen::Matrix2d d_off, d_k;
     ASSERT_TRUE(DistortOffset(offset, k1, k2, kPixelMm, &out, &d_off, &d_k));

@@ -71,7 +71,8 @@ TEST(BSpline, KnotInsertionLeavesCurveUnchanged) {
     curve.InsertKnot(curve.t_begin() + u01(rng) * (curve.t_end() - curve.t_begin()));
   EXPECT_EQ(curve.num_control_points(), original.num_control_points() + 10);
   for (int trial = 0; trial < 300; ++trial) {
-    const double t = original.t_begin() + (trial + 0.5) / 300.0 * (original.t_end() - original.t_begin());
+    const double t =
+        original.t_begin() + (trial + 0.5) / 300.0 * (original.t_end() - original.t_begin());
     for (int derivative = 0; derivative <= 2; ++derivative)
       EXPECT_LT((curve.Evaluate(t, derivative) - original.Evaluate(t, derivative)).norm(), 1e-12);
   }
@@ -82,7 +83,8 @@ TEST(BSpline, FitRecoversGeneratingSpline) {
   const CubicBSpline truth = RandomSpline(rng, 8, 2);
   const int m = 400;
   Eigen::VectorXd times(m);
-  for (int s = 0; s < m; ++s) times[s] = truth.t_begin() + (s + 0.5) / m * (truth.t_end() - truth.t_begin());
+  for (int s = 0; s < m; ++s)
+    times[s] = truth.t_begin() + (s + 0.5) / m * (truth.t_end() - truth.t_begin());
   Eigen::MatrixXd samples(m, 2);
   for (int s = 0; s < m; ++s) samples.row(s) = truth.Evaluate(times[s]).transpose();
   const CubicBSpline fitted = FitCubicBSpline(truth.knots(), times, samples);

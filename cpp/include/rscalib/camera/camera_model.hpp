@@ -25,8 +25,7 @@ template <typename T>
 bool ProjectPoint(CameraModelType type, const T* params, const double* pixel_size_mm,
                   const T* point_c, T* uv) {
   switch (type) {
-    case CameraModelType::kPinholeRadtan:
-      return PinholeRadtan::Project(params, point_c, uv);
+    case CameraModelType::kPinholeRadtan: return PinholeRadtan::Project(params, point_c, uv);
     case CameraModelType::kPinholeEquidistant:
       return PinholeEquidistant::Project(params, point_c, uv);
     case CameraModelType::kCiveraRadial:

@@ -56,7 +56,7 @@ struct CiveraRadial {
     const T ru_t = sqrt(ru2);
     const T g_t = T(rd) * (T(1.0) + T(rd2) * (params[3] + T(rd2) * params[4])) - ru_t;
     const T rd_t = T(rd) - g_t / dg;  // value rd, first derivatives exact
-    const T scale = rd_t / ru_t;     // = 1 / (1 + k1 rd^2 + k2 rd^4)
+    const T scale = rd_t / ru_t;      // = 1 / (1 + k1 rd^2 + k2 rd^4)
     uv_d[0] = params[1] + du * scale;
     uv_d[1] = params[2] + dv * scale;
     return true;
@@ -65,8 +65,14 @@ struct CiveraRadial {
   // r_d with r_d (1 + k1 r_d^2 + k2 r_d^4) = r_u on the rising branch from r_d = 0 (where
   // the model is invertible): Newton kept inside a bisection bracket [0, r_peak].
   static bool SolveDistortedRadius(double k1, double k2, double ru, double* rd_out) {
-    const auto g = [&](double r) { const double r2 = r * r; return r * (1.0 + r2 * (k1 + r2 * k2)) - ru; };
-    const auto dg = [&](double r) { const double r2 = r * r; return 1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2); };
+    const auto g = [&](double r) {
+      const double r2 = r * r;
+      return r * (1.0 + r2 * (k1 + r2 * k2)) - ru;
+    };
+    const auto dg = [&](double r) {
+      const double r2 = r * r;
+      return 1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2);
+    };
     // Upper end of the bracket: the first zero of dg (r_peak), or a radius where g > 0.
     double hi = std::max(ru, 1e-12);
     if (k2 < 0.0 || k1 < 0.0) {
@@ -95,11 +101,13 @@ struct CiveraRadial {
     double lo = 0.0, rd = std::min(ru, hi);
     for (int iteration = 0; iteration < 100; ++iteration) {
       const double value = g(rd);
-      if (value < 0.0) lo = rd; else hi = rd;
+      if (value < 0.0) lo = rd;
+      else hi = rd;
       const double slope = dg(rd);
       double next = rd - value / slope;
       if (!(slope > 0.0) || !(next > lo && next < hi)) next = 0.5 * (lo + hi);
-      if (std::abs(next - rd) <= 1e-15 * std::max(1.0, ru) || hi - lo <= 1e-15 * std::max(1.0, ru)) {
+      if (std::abs(next - rd) <= 1e-15 * std::max(1.0, ru) ||
+          hi - lo <= 1e-15 * std::max(1.0, ru)) {
         rd = next;
         break;
       }

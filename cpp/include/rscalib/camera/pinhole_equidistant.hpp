@@ -30,7 +30,8 @@ struct PinholeEquidistant {
     const T theta = atan(r);
     const T theta2 = theta * theta;
     const T poly =
-        T(1.0) + theta2 * (params[4] + theta2 * (params[5] + theta2 * (params[6] + theta2 * params[7])));
+        T(1.0) +
+        theta2 * (params[4] + theta2 * (params[5] + theta2 * (params[6] + theta2 * params[7])));
     return theta * poly / r;
   }
 

@@ -17,24 +17,24 @@ namespace rscalib::rs {
 
 // One row per detected target point.
 struct RsObservations {
-  Eigen::VectorXd frame_time_s;    // (M) time row 0 of the observation's frame is exposed
-  Eigen::MatrixX2d uv;             // (M, 2) measured pixel
-  Eigen::MatrixX3d point_w;        // (M, 3) target point, world (= target) frame
+  Eigen::VectorXd frame_time_s;  // (M) time row 0 of the observation's frame is exposed
+  Eigen::MatrixX2d uv;           // (M, 2) measured pixel
+  Eigen::MatrixX3d point_w;      // (M, 3) target point, world (= target) frame
 };
 
 struct RsSolverOptions {
-  double pixel_sigma = 0.3;                  // R = sigma^2 I, px
-  bool standardise_errors = true;            // A R A^T (false: plain R)
-  double max_rs_gain = 0.8;                  // clamp of d * v_dot in A
+  double pixel_sigma = 0.3;        // R = sigma^2 I, px
+  bool standardise_errors = true;  // A R A^T (false: plain R)
+  double max_rs_gain = 0.8;        // clamp of d * v_dot in A
   bool use_motion_prior = true;
   // diag(Q) of the acceleration prior; see docs/formulation.md for why not the paper's
   // 1e-5 / 1e-2 (which biases d with errors standardised in pixels).
   Eigen::Matrix<double, 6, 1> motion_prior_q =
       (Eigen::Matrix<double, 6, 1>() << 1.0, 1.0, 1.0, 1e2, 1e2, 1e2).finished();
-  bool estimate_line_delay = true;           // false: trajectory only (localisation)
-  std::string robust_loss = "none";          // none | huber | cauchy
-  double robust_loss_scale = 3.0;            // in standardised units (sigmas)
-  int max_iterations = 100;                  // per Ceres solve; 0: build + covariance only
+  bool estimate_line_delay = true;   // false: trajectory only (localisation)
+  std::string robust_loss = "none";  // none | huber | cauchy
+  double robust_loss_scale = 3.0;    // in standardised units (sigmas)
+  int max_iterations = 100;          // per Ceres solve; 0: build + covariance only
   int max_outer_iterations = 4;
   double function_tolerance = 1e-9;
   double gradient_tolerance = 1e-12;
@@ -45,20 +45,20 @@ struct RsSolverOptions {
 };
 
 struct RsSolveSummary {
-  bool converged = false;           // Ceres reported convergence in the last solve
-  std::string message;              // Ceres' or ours
-  int iterations = 0;               // Ceres iterations over all outer loops
+  bool converged = false;  // Ceres reported convergence in the last solve
+  std::string message;     // Ceres' or ours
+  int iterations = 0;      // Ceres iterations over all outer loops
   int outer_iterations = 0;
-  int reattached = 0;               // observations that changed span in the last re-attach
-  int clamped_weights = 0;          // observations whose RS gain was clamped
-  int unprojectable = 0;            // observations dropped (behind camera etc.)
+  int reattached = 0;       // observations that changed span in the last re-attach
+  int clamped_weights = 0;  // observations whose RS gain was clamped
+  int unprojectable = 0;    // observations dropped (behind camera etc.)
   double line_delay_s = 0.0;
-  double line_delay_std_s = 0.0;    // +inf when the covariance is rank deficient
+  double line_delay_std_s = 0.0;  // +inf when the covariance is rank deficient
   bool covariance_ok = false;
-  double measurement_cost = 0.0;    // J = sum of squared standardised errors
-  double prior_cost = 0.0;          // motion prior part
-  int num_error_terms = 0;          // N (2-D reprojection errors)
-  double rms_px = 0.0;              // RMS of the raw pixel errors (per coordinate)
+  double measurement_cost = 0.0;  // J = sum of squared standardised errors
+  double prior_cost = 0.0;        // motion prior part
+  int num_error_terms = 0;        // N (2-D reprojection errors)
+  double rms_px = 0.0;            // RMS of the raw pixel errors (per coordinate)
   double solve_time_s = 0.0;
   double covariance_time_s = 0.0;
   // Per knot segment s (spline.num_segments()): J_s and N_s of the errors in it.
@@ -71,9 +71,9 @@ struct RsSolveSummary {
 };
 
 // Refines `trajectory` (6-D pose spline [p; phi], T_cw) and `line_delay_s` in place.
-RsSolveSummary SolveLineDelay(const RsObservations& observations,
-                              const camera::CameraModel& camera, spline::CubicBSpline* trajectory,
-                              double* line_delay_s, const RsSolverOptions& options);
+RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::CameraModel& camera,
+                              spline::CubicBSpline* trajectory, double* line_delay_s,
+                              const RsSolverOptions& options);
 
 // Evaluates residuals and per-segment statistics without solving.
 RsSolveSummary EvaluateLineDelay(const RsObservations& observations,

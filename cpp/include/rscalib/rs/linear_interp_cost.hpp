@@ -17,9 +17,9 @@
 //   pose_a     : 6, T_cw of frame a at its row-0 time t_a, [p; phi]
 //   pose_b     : 6, T_cw of frame b = a + 1 (next frame of the same chain), [p; phi]
 //   line_delay : 1, d in seconds per row
+#include <Eigen/Core>
 #include <ceres/autodiff_cost_function.h>
 #include <ceres/rotation.h>
-#include <Eigen/Core>
 
 #include "rscalib/rs/rs_projection.hpp"
 
@@ -81,7 +81,9 @@ struct LinearInterpCost {
   LinearInterpCost(const SpanCamera& cam, double frame_offset_s, double interval_s,
                    const double* uv_measured, const double* point_w,
                    const Eigen::Matrix2d& sqrt_information)
-      : cam_(cam), frame_offset_s_(frame_offset_s), inverse_interval_per_s_(1.0 / interval_s),
+      : cam_(cam),
+        frame_offset_s_(frame_offset_s),
+        inverse_interval_per_s_(1.0 / interval_s),
         sqrt_information_(sqrt_information) {
     uv_[0] = uv_measured[0];
     uv_[1] = uv_measured[1];

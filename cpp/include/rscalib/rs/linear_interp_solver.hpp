@@ -22,24 +22,24 @@ namespace rscalib::rs {
 
 // One row per detected target point; frames index into the frame arrays of the solve.
 struct LinearInterpObservations {
-  Eigen::VectorXi frame_index;     // (M) frame of the observation
-  Eigen::MatrixX2d uv;             // (M, 2) measured pixel
-  Eigen::MatrixX3d point_w;        // (M, 3) target point, world (= target) frame
+  Eigen::VectorXi frame_index;  // (M) frame of the observation
+  Eigen::MatrixX2d uv;          // (M, 2) measured pixel
+  Eigen::MatrixX3d point_w;     // (M, 3) target point, world (= target) frame
 };
 
 // Per-frame poses T_cw at the frames' row-0 times, one [p; phi] row per frame (contiguous).
 using FramePoseMatrix = Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor>;
 
 struct LinearInterpOptions {
-  double pixel_sigma = 0.3;            // R = sigma^2 I, px
-  bool standardise_errors = false;     // the baseline is plain reprojection error / sigma
-  double max_rs_gain = 0.8;            // clamp of d * v_dot when standardising
-  double max_frame_interval_s = 0.0;   // neighbours at most this far apart; 0: 1.5 x median
-  bool estimate_line_delay = true;     // false: poses only
-  std::string robust_loss = "none";    // none | huber | cauchy
-  double robust_loss_scale = 3.0;      // in standardised units (sigmas)
+  double pixel_sigma = 0.3;           // R = sigma^2 I, px
+  bool standardise_errors = false;    // the baseline is plain reprojection error / sigma
+  double max_rs_gain = 0.8;           // clamp of d * v_dot when standardising
+  double max_frame_interval_s = 0.0;  // neighbours at most this far apart; 0: 1.5 x median
+  bool estimate_line_delay = true;    // false: poses only
+  std::string robust_loss = "none";   // none | huber | cauchy
+  double robust_loss_scale = 3.0;     // in standardised units (sigmas)
   int max_iterations = 100;
-  int max_outer_iterations = 4;        // re-pairing rounds (only a sign change of d re-pairs)
+  int max_outer_iterations = 4;  // re-pairing rounds (only a sign change of d re-pairs)
   double function_tolerance = 1e-9;
   double gradient_tolerance = 1e-12;
   double parameter_tolerance = 1e-10;
@@ -54,17 +54,17 @@ struct LinearInterpSummary {
   int iterations = 0;
   int outer_iterations = 0;
   double line_delay_s = 0.0;
-  double line_delay_std_s = 0.0;       // +inf when the covariance is rank deficient
+  double line_delay_std_s = 0.0;  // +inf when the covariance is rank deficient
   bool covariance_ok = false;
-  double measurement_cost = 0.0;       // J = sum of squared (standardised) errors
-  int num_error_terms = 0;             // N (2-D errors used)
-  double rms_px = 0.0;                 // RMS of the raw pixel errors (per coordinate)
-  int isolated = 0;                    // observations dropped: their frame has no neighbour
-  int extrapolated = 0;                // observations using the pair on the other side
-  int unprojectable = 0;               // observations dropped (behind the camera etc.)
+  double measurement_cost = 0.0;  // J = sum of squared (standardised) errors
+  int num_error_terms = 0;        // N (2-D errors used)
+  double rms_px = 0.0;            // RMS of the raw pixel errors (per coordinate)
+  int isolated = 0;               // observations dropped: their frame has no neighbour
+  int extrapolated = 0;           // observations using the pair on the other side
+  int unprojectable = 0;          // observations dropped (behind the camera etc.)
   int clamped_weights = 0;
-  int num_chains = 0;                  // runs of neighbouring frames (>= 2 frames)
-  double max_frame_interval_s = 0.0;   // the threshold used
+  int num_chains = 0;                 // runs of neighbouring frames (>= 2 frames)
+  double max_frame_interval_s = 0.0;  // the threshold used
   double solve_time_s = 0.0;
   double covariance_time_s = 0.0;
   // Per observation: first frame a of its pair (-1: not used), raw error, squared

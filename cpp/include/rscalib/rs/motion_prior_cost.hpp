@@ -4,8 +4,8 @@
 //   r_g = sqrt(w_g) Q^{-1/2} x''(t_g),  g = 1, 2   -> 12 residuals, sum r^2 = the integral.
 //
 // Parameter blocks: c0, c1, c2, c3 : 6 each, control points span-3 .. span, [p; phi].
-#include <ceres/autodiff_cost_function.h>
 #include <Eigen/Core>
+#include <ceres/autodiff_cost_function.h>
 
 #include "rscalib/spline/bspline_basis.hpp"
 

@@ -11,15 +11,15 @@ namespace rscalib::rs {
 // Fixed inputs of one observation's projection. Intrinsics are constants here.
 struct SpanCamera {
   camera::CameraModelType model;
-  const double* params;          // camera::CameraModel::params().data()
+  const double* params;  // camera::CameraModel::params().data()
   int num_params;
-  const double* pixel_size_mm;   // civera-radial only
+  const double* pixel_size_mm;  // civera-radial only
 };
 
 // The SpanCamera of `camera` (which must outlive it).
 inline SpanCamera MakeSpanCamera(const camera::CameraModel& camera) {
-  return SpanCamera{camera.type(), camera.params().data(),
-                    static_cast<int>(camera.params().size()), camera.pixel_size_mm().data()};
+  return SpanCamera{camera.type(), camera.params().data(), static_cast<int>(camera.params().size()),
+                    camera.pixel_size_mm().data()};
 }
 
 // uv = pi(T_cw(t) P) with t = span_start + u and the pose from the span's 4 control

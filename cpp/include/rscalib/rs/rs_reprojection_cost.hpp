@@ -21,7 +21,9 @@ struct RsReprojectionCost {
   RsReprojectionCost(const spline::SpanPowerBasis& basis, const SpanCamera& cam,
                      double frame_time_minus_span_start_s, const double* uv_measured,
                      const double* point_w, const Eigen::Matrix2d& sqrt_information)
-      : basis_(basis), cam_(cam), frame_offset_s_(frame_time_minus_span_start_s),
+      : basis_(basis),
+        cam_(cam),
+        frame_offset_s_(frame_time_minus_span_start_s),
         sqrt_information_(sqrt_information) {
     uv_[0] = uv_measured[0];
     uv_[1] = uv_measured[1];

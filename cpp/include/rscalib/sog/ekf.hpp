@@ -18,8 +18,8 @@ using Matrix5d = Eigen::Matrix<double, 5, 5>;
 using Matrix13d = Eigen::Matrix<double, 13, 13>;
 
 struct ProcessNoise {
-  double accel_sigma = 3.0;          // m/s^2
-  double angular_accel_sigma = 4.5;  // rad/s^2
+  double accel_sigma = 3.0;                             // m/s^2
+  double angular_accel_sigma = 4.5;                     // rad/s^2
   Vector5d calibration_random_walk = Vector5d::Zero();  // per sqrt(s); 0 = static calibration
 };
 

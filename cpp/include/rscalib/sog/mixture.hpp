@@ -50,7 +50,8 @@ template <int Dim>
 void MergeGaussians(const std::vector<double>& weights,
                     const std::vector<Eigen::Matrix<double, Dim, 1>>& means,
                     const std::vector<Eigen::Matrix<double, Dim, Dim>>& covariances,
-                    Eigen::Matrix<double, Dim, 1>* mean, Eigen::Matrix<double, Dim, Dim>* covariance) {
+                    Eigen::Matrix<double, Dim, 1>* mean,
+                    Eigen::Matrix<double, Dim, Dim>* covariance) {
   const Eigen::Index dim = means.empty() ? 0 : means[0].size();
   double total = 0.0;
   mean->setZero(dim);

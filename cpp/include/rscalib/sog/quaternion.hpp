@@ -25,18 +25,22 @@ Quaternion<T> QuaternionProduct(const Quaternion<T>& p, const Quaternion<T>& q) 
 // p ⊗ q = QuaternionLeftMatrix(p) q = QuaternionRightMatrix(q) p.
 inline Eigen::Matrix4d QuaternionLeftMatrix(const Eigen::Vector4d& p) {
   Eigen::Matrix4d m;
+  // clang-format off
   m << p[0], -p[1], -p[2], -p[3],
        p[1], p[0], -p[3], p[2],
        p[2], p[3], p[0], -p[1],
        p[3], -p[2], p[1], p[0];
+  // clang-format on
   return m;
 }
 inline Eigen::Matrix4d QuaternionRightMatrix(const Eigen::Vector4d& q) {
   Eigen::Matrix4d m;
+  // clang-format off
   m << q[0], -q[1], -q[2], -q[3],
        q[1], q[0], q[3], -q[2],
        q[2], -q[3], q[0], q[1],
        q[3], q[2], -q[1], q[0];
+  // clang-format on
   return m;
 }
 
@@ -46,9 +50,11 @@ template <typename T>
 Eigen::Matrix<T, 3, 3> QuaternionToRotation(const Quaternion<T>& q) {
   const T w = q[0], x = q[1], y = q[2], z = q[3];
   Eigen::Matrix<T, 3, 3> r;
+  // clang-format off
   r << w * w + x * x - y * y - z * z, T(2) * (x * y - w * z), T(2) * (x * z + w * y),
        T(2) * (x * y + w * z), w * w - x * x + y * y - z * z, T(2) * (y * z - w * x),
        T(2) * (x * z - w * y), T(2) * (y * z + w * x), w * w - x * x - y * y + z * z;
+  // clang-format on
   return r;
 }
 

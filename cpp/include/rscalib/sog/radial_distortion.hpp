@@ -10,7 +10,8 @@ namespace rscalib::sog {
 // the implicit function theorem on the closed-form undistortion.
 bool DistortOffset(const Eigen::Vector2d& offset_u, double k1, double k2,
                    const Eigen::Vector2d& pixel_size_mm, Eigen::Vector2d* offset_d,
-                   Eigen::Matrix2d* d_offset_d_offset = nullptr, Eigen::Matrix2d* d_offset_d_k = nullptr);
+                   Eigen::Matrix2d* d_offset_d_offset = nullptr,
+                   Eigen::Matrix2d* d_offset_d_k = nullptr);
 
 // Jacobians of the closed-form undistortion U(delta_d) = delta_d (1 + k1 rd^2 + k2 rd^4)
 // w.r.t. the distorted offset (2x2) and (k1, k2) (2x2).

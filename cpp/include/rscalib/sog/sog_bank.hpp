@@ -74,8 +74,8 @@ struct MergedPredictions {
 };
 
 struct SogUpdateReport {
-  std::vector<bool> used;          // per input row: matched, inside the gate, used
-  std::vector<double> gate_chi2;   // per input row: Mahalanobis^2 to the merged prediction
+  std::vector<bool> used;           // per input row: matched, inside the gate, used
+  std::vector<double> gate_chi2;    // per input row: Mahalanobis^2 to the merged prediction
   Eigen::VectorXd log_likelihoods;  // per Gaussian (before pruning), log N(nu; 0, S)
   Eigen::VectorXd nis;              // per Gaussian, nu^T S^-1 nu (expect ~ 2 num_used)
   std::vector<int> gaussian_ids;    // ids of those Gaussians

@@ -8,10 +8,10 @@
 // measurement row touches one 12-column block plus its feature.
 namespace rscalib::sog {
 
-constexpr int kCalibration = 0;      // f, Cx, Cy, k1 (mm^-2), k2 (mm^-4)
-constexpr int kPosition = 5;         // r, camera centre in the world
-constexpr int kQuaternion = 8;       // q_wc, scalar first
-constexpr int kVelocity = 12;        // v, world frame, m/s
+constexpr int kCalibration = 0;       // f, Cx, Cy, k1 (mm^-2), k2 (mm^-4)
+constexpr int kPosition = 5;          // r, camera centre in the world
+constexpr int kQuaternion = 8;        // q_wc, scalar first
+constexpr int kVelocity = 12;         // v, world frame, m/s
 constexpr int kAngularVelocity = 15;  // w, camera frame, rad/s
 constexpr int kCalibrationDim = 5;
 constexpr int kMeasuredCameraDim = 12;  // calibration + r + q: what a projection depends on
