@@ -1,6 +1,7 @@
 // Bindings: camera models (project, Jacobians, unproject), vectorised over points.
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
@@ -18,23 +19,33 @@ namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-py::array_t<double> Project(const CameraModel& cam, const DoubleArray& points) {
+// out_row = fn(in_row) for every row of a (count, In) or (In,) array -> (count, Out) or (Out,);
+// rows where fn returns false are NaN. release_gil: run the loop without the GIL.
+template <int In, int Out, typename Fn>
+py::array_t<double> MapRows(const DoubleArray& array, const char* what, bool release_gil, Fn&& fn) {
   bool vector = false;
-  const py::ssize_t count = CheckRows(points, 3, "points", &vector);
-  py::array_t<double> out({count, py::ssize_t{2}});
-  const double* in = points.data();
+  const py::ssize_t count = CheckRows(array, In, what, &vector);
+  py::array_t<double> out({count, py::ssize_t{Out}});
+  const double* in = array.data();
   double* dst = out.mutable_data();
   {
-    py::gil_scoped_release release;
-    for (py::ssize_t i = 0; i < count; ++i) {
-      Eigen::Vector2d uv;
-      if (!cam.Project(Eigen::Map<const Eigen::Vector3d>(in + 3 * i), &uv)) uv.setConstant(kNaN);
-      dst[2 * i] = uv[0];
-      dst[2 * i + 1] = uv[1];
-    }
+    std::optional<py::gil_scoped_release> release;
+    if (release_gil) release.emplace();
+    for (py::ssize_t i = 0; i < count; ++i)
+      if (!fn(in + In * i, dst + Out * i))
+        for (int k = 0; k < Out; ++k) dst[Out * i + k] = kNaN;
   }
-  if (vector) return out.reshape({py::ssize_t{2}});
+  if (vector) return out.reshape({py::ssize_t{Out}});
   return out;
+}
+
+py::array_t<double> Project(const CameraModel& cam, const DoubleArray& points) {
+  return MapRows<3, 2>(points, "points", true, [&](const double* point, double* uv) {
+    Eigen::Vector2d projected;
+    if (!cam.Project(Eigen::Map<const Eigen::Vector3d>(point), &projected)) return false;
+    Eigen::Vector2d::Map(uv) = projected;
+    return true;
+  });
 }
 
 py::tuple ProjectWithJacobians(const CameraModel& cam, const DoubleArray& points) {
@@ -69,45 +80,25 @@ py::tuple ProjectWithJacobians(const CameraModel& cam, const DoubleArray& points
 }
 
 py::array_t<double> Unproject(const CameraModel& cam, const DoubleArray& pixels) {
-  bool vector = false;
-  const py::ssize_t count = CheckRows(pixels, 2, "pixels", &vector);
-  py::array_t<double> out({count, py::ssize_t{3}});
-  const double* in = pixels.data();
-  double* dst = out.mutable_data();
-  {
-    py::gil_scoped_release release;
-    for (py::ssize_t i = 0; i < count; ++i) {
-      Eigen::Vector3d ray;
-      if (!cam.Unproject(Eigen::Map<const Eigen::Vector2d>(in + 2 * i), &ray))
-        ray.setConstant(kNaN);
-      Eigen::Map<Eigen::Vector3d>(dst + 3 * i) = ray;
-    }
-  }
-  if (vector) return out.reshape({py::ssize_t{3}});
-  return out;
+  return MapRows<2, 3>(pixels, "pixels", true, [&](const double* uv, double* ray) {
+    Eigen::Vector3d r;
+    if (!cam.Unproject(Eigen::Map<const Eigen::Vector2d>(uv), &r)) return false;
+    Eigen::Vector3d::Map(ray) = r;
+    return true;
+  });
 }
 
 // civera-radial only: pixel <-> pixel distortion maps.
 py::array_t<double> CiveraMap(const CameraModel& cam, const DoubleArray& pixels, bool distort) {
   if (cam.type() != CameraModelType::kCiveraRadial)
     throw InputError("distort/undistort of pixels is defined for civera-radial cameras only");
-  bool vector = false;
-  const py::ssize_t count = CheckRows(pixels, 2, "pixels", &vector);
-  py::array_t<double> out({count, py::ssize_t{2}});
-  const double* in = pixels.data();
-  double* dst = out.mutable_data();
-  for (py::ssize_t i = 0; i < count; ++i) {
-    if (distort) {
-      if (!camera::CiveraRadial::Distort(cam.params().data(), cam.pixel_size_mm().data(),
-                                         in + 2 * i, dst + 2 * i))
-        dst[2 * i] = dst[2 * i + 1] = kNaN;
-    } else {
-      camera::CiveraRadial::Undistort(cam.params().data(), cam.pixel_size_mm().data(), in + 2 * i,
-                                      dst + 2 * i);
-    }
-  }
-  if (vector) return out.reshape({py::ssize_t{2}});
-  return out;
+  const double* params = cam.params().data();
+  const double* pixel_size_mm = cam.pixel_size_mm().data();
+  return MapRows<2, 2>(pixels, "pixels", false, [&](const double* in, double* out) {
+    if (distort) return camera::CiveraRadial::Distort(params, pixel_size_mm, in, out);
+    camera::CiveraRadial::Undistort(params, pixel_size_mm, in, out);
+    return true;
+  });
 }
 
 }  // namespace

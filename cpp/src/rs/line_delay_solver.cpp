@@ -184,8 +184,8 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
       }
     }
   };
-  detail::SolveSettings settings = detail::MakeSolveSettings(options);
-  settings.failure_message = "the line-delay solve failed: ";
+  const detail::SolveSettings settings =
+      detail::MakeSolveSettings(options, true, "the line-delay solve failed: ");
   const detail::SolveResult result =
       detail::SolveWithCovariance(settings, line_delay_s, started, reattach, add_residuals);
   result.CopyTo(&summary);

@@ -172,10 +172,9 @@ LinearInterpSummary SolveLineDelayLinear(const LinearInterpObservations& observa
           loss, poses + 6 * a, poses + 6 * (a + 1), line_delay_s);
     }
   };
-  detail::SolveSettings settings = detail::MakeSolveSettings(options);
   // The standardisation weights depend on d: with them, also wait for d to settle.
-  settings.wait_for_line_delay = options.standardise_errors;
-  settings.failure_message = "the linear-interpolation solve failed: ";
+  const detail::SolveSettings settings = detail::MakeSolveSettings(
+      options, options.standardise_errors, "the linear-interpolation solve failed: ");
   const detail::SolveResult result =
       detail::SolveWithCovariance(settings, line_delay_s, started, repair, add_residuals);
   result.CopyTo(&summary);

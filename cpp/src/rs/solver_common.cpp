@@ -1,11 +1,8 @@
 #include "solver_common.hpp"
 
-#include <algorithm>
 #include <memory>
 #include <optional>
 #include <utility>
-
-#include <ceres/ceres.h>
 
 #include "rscalib/core/error.hpp"
 #include "rscalib/rs/error_standardisation.hpp"
@@ -26,24 +23,6 @@ std::unique_ptr<ceres::LossFunction> MakeRobustLoss(const std::string& name, dou
   if (name == "huber") return std::make_unique<ceres::HuberLoss>(scale);
   if (name == "cauchy") return std::make_unique<ceres::CauchyLoss>(scale);
   return nullptr;
-}
-
-// DogLeg on sparse normal equations (CHOLMOD when SuiteSparse is there).
-ceres::Solver::Options MakeSolverOptions(const SolveSettings& settings) {
-  ceres::Solver::Options solver_options;
-  solver_options.trust_region_strategy_type = ceres::DOGLEG;
-  solver_options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  solver_options.sparse_linear_algebra_library_type =
-      ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE
-                                                                            : ceres::EIGEN_SPARSE;
-  solver_options.num_threads = std::max(1, settings.num_threads);
-  solver_options.max_num_iterations = settings.max_iterations;
-  solver_options.function_tolerance = settings.function_tolerance;
-  solver_options.gradient_tolerance = settings.gradient_tolerance;
-  solver_options.parameter_tolerance = settings.parameter_tolerance;
-  solver_options.minimizer_progress_to_stdout = settings.verbose;
-  solver_options.logging_type = settings.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
-  return solver_options;
 }
 
 // Variance of the 1-D parameter block `parameter` of `problem` at its current value (Ceres'
@@ -97,7 +76,6 @@ SolveResult SolveWithCovariance(const SolveSettings& settings, double* line_dela
                                 const AddResiduals& add_residuals) {
   const std::unique_ptr<ceres::LossFunction> loss =
       MakeRobustLoss(settings.robust_loss, settings.robust_loss_scale);
-  const ceres::Solver::Options solver_options = MakeSolverOptions(settings);
 
   SolveResult result;
   std::unique_ptr<ceres::Problem> problem;
@@ -117,14 +95,14 @@ SolveResult SolveWithCovariance(const SolveSettings& settings, double* line_dela
     add_residuals(problem.get(), loss.get());
     if (!settings.estimate_line_delay) problem->SetParameterBlockConstant(line_delay_s);
 
-    if (settings.max_iterations <= 0) {  // evaluation / covariance only
+    if (settings.solver.max_num_iterations <= 0) {  // evaluation / covariance only
       result.converged = true;
       result.message = "not solved (max_iterations = 0)";
       result.outer_iterations = outer + 1;
       break;
     }
     ceres::Solver::Summary ceres_summary;
-    ceres::Solve(solver_options, problem.get(), &ceres_summary);
+    ceres::Solve(settings.solver, problem.get(), &ceres_summary);
     result.iterations += static_cast<int>(ceres_summary.iterations.size());
     result.outer_iterations = outer + 1;
     result.converged = ceres_summary.termination_type == ceres::CONVERGENCE;

@@ -8,6 +8,7 @@
 // The Ceres cost functors are not instantiated here (each solver's own translation unit).
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -16,11 +17,7 @@
 #include <vector>
 
 #include <Eigen/Core>
-
-namespace ceres {
-class LossFunction;
-class Problem;
-}  // namespace ceres
+#include <ceres/ceres.h>
 
 namespace rscalib::rs::detail {
 
@@ -31,39 +28,47 @@ void ValidateNoiseOptions(double pixel_sigma, double max_rs_gain);
 // Throws InputError unless the name is none, huber or cauchy.
 void ValidateRobustLoss(const std::string& robust_loss);
 
-// The options of the outer loop and of each Ceres solve (fields both option structs have).
+// The options of the outer loop and of each Ceres solve.
 struct SolveSettings {
-  std::string robust_loss = "none";  // none | huber | cauchy
-  double robust_loss_scale = 3.0;    // in standardised units (sigmas)
-  int max_iterations = 100;          // per Ceres solve; 0: build + covariance only
-  int max_outer_iterations = 4;
-  double function_tolerance = 1e-9;
-  double gradient_tolerance = 1e-12;
-  double parameter_tolerance = 1e-10;
-  int num_threads = 2;
-  bool verbose = false;
-  bool estimate_line_delay = true;
-  bool compute_covariance = true;
+  ceres::Solver::Options solver;  // max_num_iterations <= 0: build + covariance only
+  std::string robust_loss;        // none | huber | cauchy, of the measurement errors
+  double robust_loss_scale;       // in standardised units (sigmas)
+  int max_outer_iterations;
+  int num_threads;  // also of the covariance
+  bool estimate_line_delay;
+  bool compute_covariance;
   // Stop only once d has settled too (when the weights or the attachment depend on d).
-  bool wait_for_line_delay = true;
+  bool wait_for_line_delay;
   // Start of the InputError thrown when Ceres reports a failure.
-  std::string failure_message = "the solve failed: ";
+  std::string failure_message;
 };
 
+// From the options both solvers have (RsSolverOptions, LinearInterpOptions): DOGLEG on
+// sparse normal equations (CHOLMOD when SuiteSparse is there), their tolerances.
 template <typename Options>
-SolveSettings MakeSolveSettings(const Options& options) {
+SolveSettings MakeSolveSettings(const Options& options, bool wait_for_line_delay,
+                                const std::string& failure_message) {
   SolveSettings s;
+  s.solver.trust_region_strategy_type = ceres::DOGLEG;
+  s.solver.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  s.solver.sparse_linear_algebra_library_type =
+      ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE
+                                                                            : ceres::EIGEN_SPARSE;
+  s.solver.num_threads = std::max(1, options.num_threads);
+  s.solver.max_num_iterations = options.max_iterations;
+  s.solver.function_tolerance = options.function_tolerance;
+  s.solver.gradient_tolerance = options.gradient_tolerance;
+  s.solver.parameter_tolerance = options.parameter_tolerance;
+  s.solver.minimizer_progress_to_stdout = options.verbose;
+  s.solver.logging_type = options.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
   s.robust_loss = options.robust_loss;
   s.robust_loss_scale = options.robust_loss_scale;
-  s.max_iterations = options.max_iterations;
   s.max_outer_iterations = options.max_outer_iterations;
-  s.function_tolerance = options.function_tolerance;
-  s.gradient_tolerance = options.gradient_tolerance;
-  s.parameter_tolerance = options.parameter_tolerance;
   s.num_threads = options.num_threads;
-  s.verbose = options.verbose;
   s.estimate_line_delay = options.estimate_line_delay;
   s.compute_covariance = options.compute_covariance;
+  s.wait_for_line_delay = wait_for_line_delay;
+  s.failure_message = failure_message;
   return s;
 }
 

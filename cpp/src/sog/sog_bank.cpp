@@ -40,6 +40,25 @@ void ParallelFor(int count, int num_threads, Fn&& fn) {
   for (std::thread& thread : pool) thread.join();
 }
 
+// Moment-matched mean and covariance (paper eq. 5) of the state block [offset, offset + Dim)
+// over the filters of the bank.
+template <int Dim>
+void BlockMoments(const std::vector<SelfCalibrationEkf>& filters,
+                  const Eigen::VectorXd& log_weights, int offset,
+                  Eigen::Matrix<double, Dim, 1>* mean,
+                  Eigen::Matrix<double, Dim, Dim>* covariance) {
+  const size_t count = filters.size();
+  std::vector<double> w(count);
+  std::vector<Eigen::Matrix<double, Dim, 1>> means(count);
+  std::vector<Eigen::Matrix<double, Dim, Dim>> covs(count);
+  for (size_t i = 0; i < count; ++i) {
+    w[i] = std::exp(log_weights[static_cast<Eigen::Index>(i)]);
+    means[i] = filters[i].mean().template segment<Dim>(offset);
+    covs[i] = filters[i].covariance().template block<Dim, Dim>(offset, offset);
+  }
+  MergeGaussians<Dim>(w, means, covs, mean, covariance);
+}
+
 }  // namespace
 
 SogBank::SogBank(const SogOptions& options, const std::vector<Vector5d>& means,
@@ -423,27 +442,11 @@ void SogBank::RemoveFeatures(const std::vector<int64_t>& ids) {
 }
 
 void SogBank::CalibrationMoments(Vector5d* mean, Matrix5d* covariance) const {
-  std::vector<double> w(num_gaussians());
-  std::vector<Vector5d> means(num_gaussians());
-  std::vector<Matrix5d> covs(num_gaussians());
-  for (int i = 0; i < num_gaussians(); ++i) {
-    w[i] = std::exp(log_weights_[i]);
-    means[i] = filters_[i].calibration();
-    covs[i] = filters_[i].calibration_covariance();
-  }
-  MergeGaussians<5>(w, means, covs, mean, covariance);
+  BlockMoments<kCalibrationDim>(filters_, log_weights_, kCalibration, mean, covariance);
 }
 
 void SogBank::MotionMoments(MotionState* mean, Matrix13d* covariance) const {
-  std::vector<double> w(num_gaussians());
-  std::vector<MotionState> means(num_gaussians());
-  std::vector<Matrix13d> covs(num_gaussians());
-  for (int i = 0; i < num_gaussians(); ++i) {
-    w[i] = std::exp(log_weights_[i]);
-    means[i] = filters_[i].mean().segment<13>(kPosition);
-    covs[i] = filters_[i].covariance().block<13, 13>(kPosition, kPosition);
-  }
-  MergeGaussians<13>(w, means, covs, mean, covariance);
+  BlockMoments<kMotionDim>(filters_, log_weights_, kPosition, mean, covariance);
 }
 
 }  // namespace rscalib::sog

@@ -70,9 +70,7 @@ bool ProjectLinearInterp(const SpanCamera& cam, const double* point_w, const T* 
                          T(point_w[2]) - centre[2]};
   T point_c[3];
   ceres::UnitQuaternionRotatePoint(q, relative, point_c);
-  T params[camera::CameraModel::kMaxParams];
-  for (int i = 0; i < cam.num_params; ++i) params[i] = T(cam.params[i]);
-  return camera::ProjectPoint(cam.model, params, cam.pixel_size_mm, point_c, uv);
+  return cam.Project(point_c, uv);
 }
 
 struct LinearInterpCost {
@@ -84,23 +82,15 @@ struct LinearInterpCost {
       : cam_(cam),
         frame_offset_s_(frame_offset_s),
         inverse_interval_per_s_(1.0 / interval_s),
-        sqrt_information_(sqrt_information) {
-    uv_[0] = uv_measured[0];
-    uv_[1] = uv_measured[1];
-    point_w_[0] = point_w[0];
-    point_w_[1] = point_w[1];
-    point_w_[2] = point_w[2];
-  }
+        measurement_(uv_measured, point_w, sqrt_information) {}
 
   template <typename T>
   bool operator()(const T* pose_a, const T* pose_b, const T* line_delay, T* residual) const {
-    const T s = (T(frame_offset_s_) + T(uv_[1]) * line_delay[0]) * inverse_interval_per_s_;
+    const T s =
+        (T(frame_offset_s_) + T(measurement_.uv[1]) * line_delay[0]) * inverse_interval_per_s_;
     T uv[2];
-    if (!ProjectLinearInterp(cam_, point_w_, pose_a, pose_b, s, uv)) return false;
-    const T e0 = T(uv_[0]) - uv[0];
-    const T e1 = T(uv_[1]) - uv[1];
-    residual[0] = sqrt_information_(0, 0) * e0 + sqrt_information_(0, 1) * e1;
-    residual[1] = sqrt_information_(1, 0) * e0 + sqrt_information_(1, 1) * e1;
+    if (!ProjectLinearInterp(cam_, measurement_.point_w, pose_a, pose_b, s, uv)) return false;
+    measurement_.Residual(uv, residual);
     return true;
   }
 
@@ -116,9 +106,7 @@ struct LinearInterpCost {
   SpanCamera cam_;
   double frame_offset_s_;
   double inverse_interval_per_s_;
-  double uv_[2];
-  double point_w_[3];
-  Eigen::Matrix2d sqrt_information_;
+  WeightedMeasurement measurement_;
 };
 
 }  // namespace rscalib::rs

@@ -1,7 +1,8 @@
 #pragma once
 // Rolling-shutter projection of a target point at an explicit time, through the pose
-// spline restricted to one span (4 control points). Shared by the cost functor and by
-// the error standardisation (which needs the image velocity d/dt pi(T(t) P)).
+// spline restricted to one span (4 control points), and the weighted measurement of a
+// reprojection cost. Shared by the cost functors and by the solvers (the error
+// standardisation needs the image velocity d/dt pi(T(t) P)).
 #include "rscalib/camera/camera_model.hpp"
 #include "rscalib/geometry/pose.hpp"
 #include "rscalib/spline/bspline_basis.hpp"
@@ -14,6 +15,14 @@ struct SpanCamera {
   const double* params;  // camera::CameraModel::params().data()
   int num_params;
   const double* pixel_size_mm;  // civera-radial only
+
+  // uv = pi(point_c). False if the point cannot be projected. T: double or ceres::Jet.
+  template <typename T>
+  bool Project(const T* point_c, T* uv) const {
+    T params_t[camera::CameraModel::kMaxParams];
+    for (int i = 0; i < num_params; ++i) params_t[i] = T(params[i]);
+    return camera::ProjectPoint(model, params_t, pixel_size_mm, point_c, uv);
+  }
 };
 
 // The SpanCamera of `camera` (which must outlive it).
@@ -38,9 +47,29 @@ bool ProjectAtSpanTime(const spline::SpanPowerBasis& basis, const SpanCamera& ca
   spline::CombineControlPoints(weights[0], control_points, geometry::kPoseStateDim, state);
   T point_c[3];
   geometry::TransformWorldToCamera(state, point_w, point_c);
-  T params[camera::CameraModel::kMaxParams];
-  for (int i = 0; i < cam.num_params; ++i) params[i] = T(cam.params[i]);
-  return camera::ProjectPoint(cam.model, params, cam.pixel_size_mm, point_c, uv);
+  return cam.Project(point_c, uv);
 }
+
+// One measured pixel y of a target point and the weight W of its error (the fixed data of
+// a reprojection cost): r = W (y - uv).
+struct WeightedMeasurement {
+  WeightedMeasurement(const double* uv_measured, const double* point_w_in,
+                      const Eigen::Matrix2d& sqrt_information_in)
+      : uv{uv_measured[0], uv_measured[1]},
+        point_w{point_w_in[0], point_w_in[1], point_w_in[2]},
+        sqrt_information(sqrt_information_in) {}
+
+  template <typename T>
+  void Residual(const T* uv_predicted, T* residual) const {
+    const T e0 = T(uv[0]) - uv_predicted[0];
+    const T e1 = T(uv[1]) - uv_predicted[1];
+    residual[0] = sqrt_information(0, 0) * e0 + sqrt_information(0, 1) * e1;
+    residual[1] = sqrt_information(1, 0) * e0 + sqrt_information(1, 1) * e1;
+  }
+
+  double uv[2];
+  double point_w[3];
+  Eigen::Matrix2d sqrt_information;
+};
 
 }  // namespace rscalib::rs

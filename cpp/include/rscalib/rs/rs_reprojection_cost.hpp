@@ -24,25 +24,16 @@ struct RsReprojectionCost {
       : basis_(basis),
         cam_(cam),
         frame_offset_s_(frame_time_minus_span_start_s),
-        sqrt_information_(sqrt_information) {
-    uv_[0] = uv_measured[0];
-    uv_[1] = uv_measured[1];
-    point_w_[0] = point_w[0];
-    point_w_[1] = point_w[1];
-    point_w_[2] = point_w[2];
-  }
+        measurement_(uv_measured, point_w, sqrt_information) {}
 
   template <typename T>
   bool operator()(const T* c0, const T* c1, const T* c2, const T* c3, const T* line_delay,
                   T* residual) const {
     const T* control_points[4] = {c0, c1, c2, c3};
-    const T u = T(frame_offset_s_) + T(uv_[1]) * line_delay[0];
+    const T u = T(frame_offset_s_) + T(measurement_.uv[1]) * line_delay[0];
     T uv[2];
-    if (!ProjectAtSpanTime(basis_, cam_, point_w_, control_points, u, uv)) return false;
-    const T e0 = T(uv_[0]) - uv[0];
-    const T e1 = T(uv_[1]) - uv[1];
-    residual[0] = sqrt_information_(0, 0) * e0 + sqrt_information_(0, 1) * e1;
-    residual[1] = sqrt_information_(1, 0) * e0 + sqrt_information_(1, 1) * e1;
+    if (!ProjectAtSpanTime(basis_, cam_, measurement_.point_w, control_points, u, uv)) return false;
+    measurement_.Residual(uv, residual);
     return true;
   }
 
@@ -59,9 +50,7 @@ struct RsReprojectionCost {
   spline::SpanPowerBasis basis_;
   SpanCamera cam_;
   double frame_offset_s_;
-  double uv_[2];
-  double point_w_[3];
-  Eigen::Matrix2d sqrt_information_;
+  WeightedMeasurement measurement_;
 };
 
 }  // namespace rscalib::rs
