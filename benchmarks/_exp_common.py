@@ -4,7 +4,7 @@ Rendered videos with exact ground truth go through the same code paths as the CL
 (`rscalib simulate` -> `rscalib linedelay` / `rscalib localize`):
 
     render_video -> video.avi, truth.json, camera.yaml, target.yaml
-    read_camera(camera.yaml), load_target(target.yaml), detect_video(video.avi)   (= linedelay._detect)
+    load_camera(camera.yaml), load_target(target.yaml), detect_video(video.avi)   (= linedelay._detect)
     calibrate_line_delay / localize
 
 Videos are cached under build/exp_videos/<config>/ (build/ is git-ignored); a video is re-rendered
@@ -23,7 +23,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any, Optional
+from typing import Optional
 
 import numpy as np
 
@@ -129,8 +129,8 @@ def bluefox_camera() -> rscalib.CameraModel:
 def calm_then_wild_trajectory(camera, target_name: str, duration_s: float, seed: int):
     """The default hand-held trajectory (render.default_trajectory) with simulate.calm_then_wild's
     amplitude profile: 0.15 of the default amplitude in the first half, 1.0 in the second."""
-    from rscalib.render import RenderTarget
-    from rscalib.simulate import HandheldTrajectory, calm_then_wild, standoff_distance_m
+    from rscalib.sim.target_observations import HandheldTrajectory, calm_then_wild, standoff_distance_m
+    from rscalib.sim.target_video import RenderTarget
 
     target = RenderTarget.named(target_name)
     return HandheldTrajectory(duration_s=duration_s, seed=seed, amplitude=1.0,
@@ -146,7 +146,7 @@ def get_video(config: str, *, line_delay_s: float, fps: float, duration_s: float
               noise: float = 2.0, supersample: int = 2, motion: float = 1.0, trajectory_kind: str = "handheld",
               workers: Optional[int] = None) -> tuple[Path, float]:
     """Render (or reuse) build/exp_videos/<config>/; returns (folder, render seconds, 0 if cached)."""
-    from rscalib.render import default_camera, render_video
+    from rscalib.sim.target_video import default_camera, render_video
 
     if camera is None:
         camera = default_camera(size)
@@ -181,7 +181,7 @@ def get_video(config: str, *, line_delay_s: float, fps: float, duration_s: float
 
 def truth_trajectory(folder: Path):
     """The analytic trajectory a video was rendered with."""
-    from rscalib.render import load_truth, trajectory_from_truth
+    from rscalib.sim.target_video import load_truth, trajectory_from_truth
 
     params = json.loads((folder / "params.json").read_text())
     if params["trajectory_kind"] == "calm_then_wild":
@@ -194,11 +194,11 @@ def truth_trajectory(folder: Path):
 def detect(folder: Path, workers: Optional[int] = None):
     """What `rscalib linedelay` does before solving (commands/linedelay.py _detect): camera and target
     from the files written next to the video, detect_video with its cache."""
-    from rscalib.camera_io import read_camera
-    from rscalib.detect import detect_video
-    from rscalib.targets import load_target
+    from rscalib.detection.pipeline import detect_video
+    from rscalib.io.cameras import load_camera
+    from rscalib.io.targets import load_target
 
-    camera_file = read_camera(folder / "camera.yaml")
+    camera_file = load_camera(folder / "camera.yaml")
     target = load_target(folder / "target.yaml")
     cache_dir = None if os.environ.get("RSCALIB_CACHE_DIR") else VIDEO_ROOT / "_detections"
     detection = detect_video(folder / "video.avi", target, workers=workers, cache=True, cache_dir=cache_dir,
@@ -264,7 +264,7 @@ class Timer:
 def detection_audit(folder: Path, detection, threshold_px: float = 2.0) -> dict:
     """Detected points vs the exact RS projections in truth.json: median error and the gross
     misdetections (points farther than threshold_px, and the frames holding them)."""
-    from rscalib.render import _uv_array, load_truth
+    from rscalib.sim.target_video import _uv_array, load_truth
 
     truth = load_truth(folder)
     uv_true = _uv_array(truth["projections"]["uv_rs"])

@@ -2,9 +2,9 @@
 
     .venv/bin/python benchmarks/bench_detect.py [--frames 40] [--sizes 640x480,1920x1080]
 
-Frames are synthetic: each target (rscalib.targets.Target.draw) seen through a pinhole camera
+Frames are synthetic: each target (rscalib.io.targets.Target.draw) seen through a pinhole camera
 from a random pose (a homography warp), with mild blur and noise. Two rates per case:
-- "one process": rscalib.detect.Detector.detect on decoded grey frames (detection only);
+- "one process": rscalib.detection.detectors.Detector.detect on decoded grey frames (detection only);
 - "detect_video": the whole pipeline on an MJPG video of the same frames repeated 3 times —
   decoding, the worker processes (all usable cores) and their start-up included, no cache.
 SPEC §6 asks for at least the video's frame rate (30 fps) at 640x480.
@@ -13,22 +13,18 @@ Writes a markdown table and the machine info to benchmarks/results/bench_detect.
 from __future__ import annotations
 
 import argparse
-import datetime as dt
-import json
-import os
-import platform
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+import _common  # noqa: E402  (benchmarks/_common.py: machine record, results file)
 import cv2
 import numpy as np
 
-import rscalib
-from rscalib.detect import Detector, detect_video, usable_cores
-from rscalib.targets import target_from_dict
-import _common  # noqa: E402  (benchmarks/_common.py: machine record, results file)
+from rscalib.detection.detectors import Detector
+from rscalib.detection.pipeline import detect_video, usable_cores
+from rscalib.io.targets import target_from_dict
 
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_detect.json"
 

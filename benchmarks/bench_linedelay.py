@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 import rscalib
-from rscalib import simulate
-from rscalib.linedelay import calibrate_line_delay
+from rscalib.linedelay.spline import calibrate_line_delay
+from rscalib.sim import target_observations as simulate
 
 
 def camera_for(sim) -> rscalib.CameraModel:

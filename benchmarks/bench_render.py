@@ -13,8 +13,6 @@ image speed × exposure.
 from __future__ import annotations
 
 import argparse
-import datetime as dt
-import json
 import sys
 import tempfile
 import time
@@ -22,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rscalib import render
+from rscalib.sim import target_video as render
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import machine_info  # noqa: E402  (one definition of the machine record)
 import _common  # noqa: E402
+from _common import machine_info  # noqa: E402  (one definition of the machine record)
 
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_render.json"
 

@@ -1,4 +1,4 @@
-"""Rendering speed of the textured-room renderer (rscalib.scene_render), frames/s.
+"""Rendering speed of the textured-room renderer (rscalib.sim.scene_video), frames/s.
 
     .venv/bin/python benchmarks/bench_scene_render.py [--frames 60] [--out PATH]
 
@@ -19,7 +19,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common  # noqa: E402
 
-from rscalib import scene_render as sr  # noqa: E402
+from rscalib.sim import scene_video as sr  # noqa: E402
 
 
 def main() -> int:

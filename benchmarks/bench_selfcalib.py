@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 import rscalib
-from rscalib.scene_render import render_scene_frames
-from rscalib.selfcalib import PARAM_NAMES, self_calibrate
+from rscalib.selfcalib.calibrate import PARAM_NAMES, self_calibrate
+from rscalib.sim.scene_video import render_scene_frames
 
 
 def main() -> None:
@@ -34,7 +34,7 @@ def main() -> None:
         fps_trace = []
         last = [time.perf_counter()]
 
-        def progress(k, bank):
+        def progress(k, bank, fps_trace=fps_trace, last=last):
             now = time.perf_counter()
             fps_trace.append((bank.num_gaussians, now - last[0]))
             last[0] = now

@@ -10,22 +10,17 @@ the loop in C++, no per-time Python overhead); the scalar rows include the Pytho
 from __future__ import annotations
 
 import argparse
-import datetime as dt
-import json
-import os
-import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
 
+import _common  # noqa: E402  (benchmarks/_common.py: machine record, results file)
 import numpy as np
 import scipy
 import scipy.interpolate as si
 import scipy.spatial.transform
 
 import rscalib
-import _common  # noqa: E402  (benchmarks/_common.py: machine record, results file)
 
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_spline.json"
 

@@ -15,11 +15,11 @@ from __future__ import annotations
 
 import time
 
+import _exp_common as C
 import numpy as np
 
-import _exp_common as C
 from rscalib import calibrate_line_delay
-from rscalib.linedelay import DEFAULT_MOTION_PRIOR_Q, PAPER_MOTION_PRIOR_Q
+from rscalib.linedelay.spline import DEFAULT_MOTION_PRIOR_Q, PAPER_MOTION_PRIOR_Q
 
 NAME = "exp_ablation"
 D_S = 30e-6

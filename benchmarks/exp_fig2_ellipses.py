@@ -15,11 +15,11 @@ from __future__ import annotations
 
 import time
 
+import _exp_common as C
 import numpy as np
 
-import _exp_common as C
 from rscalib import _core
-from rscalib.render import default_camera
+from rscalib.sim.target_video import default_camera
 
 NAME = "exp_fig2_ellipses"
 D_S = 137.5e-6

@@ -1,10 +1,10 @@
 """Flicker (LED / mains) line-delay method vs the truth, and vs the target-video method.
 
-Rendered videos (rscalib.render.render_video, as `rscalib simulate --flicker-hz`): default camera
+Rendered videos (rscalib.sim.target_video.render_video, as `rscalib simulate --flicker-hz`): default camera
 640x480, 30 fps, 1 s (30 frames), checkerboard on a background, noise 2 grey levels, supersample 1,
 flicker depth 0.3 with a random phase per seed. For each line delay d, light frequency (1 kHz LED,
 100 Hz mains) and camera (static, hand-held motion) over several seeds, the video goes through
-rscalib.flicker.estimate_line_delay_flicker (= `rscalib flicker`); both estimators are recorded
+rscalib.flicker.estimate.estimate_line_delay_flicker (= `rscalib flicker`); both estimators are recorded
 when they apply (spectrum: >= 2 periods per frame; phase-drift: uses the frame timestamps). With
 motion, the 1 kHz video also goes through the target method (detect_video + calibrate_line_delay
 = `rscalib linedelay`).
@@ -28,8 +28,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine_info, write_results  # noqa: E402
 
-from rscalib.flicker import estimate_line_delay_flicker  # noqa: E402
-from rscalib.render import render_video  # noqa: E402
+from rscalib.flicker.estimate import estimate_line_delay_flicker  # noqa: E402
+from rscalib.sim.target_video import render_video  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "benchmarks" / "results" / "exp_flicker.json"
@@ -42,12 +42,12 @@ RENDER = dict(fps=30.0, size=(640, 480), duration_s=1.0, noise=2.0, supersample=
 
 
 def target_estimate(video, camera_path, target_path) -> dict:
-    from rscalib.camera_io import read_camera
-    from rscalib.detect import detect_video
-    from rscalib.linedelay import calibrate_line_delay
-    from rscalib.targets import load_target
+    from rscalib.detection.pipeline import detect_video
+    from rscalib.io.cameras import load_camera
+    from rscalib.io.targets import load_target
+    from rscalib.linedelay.spline import calibrate_line_delay
 
-    camera = read_camera(camera_path).camera
+    camera = load_camera(camera_path).camera
     detection = detect_video(video, load_target(target_path), workers=1, cache=False, progress=False)
     result = calibrate_line_delay(detection.observations, camera)
     return {"line_delay_s": result.line_delay_s, "line_delay_std_s": result.line_delay_std_s,

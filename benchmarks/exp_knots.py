@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import time
 
+import _exp_common as C
 import numpy as np
 
-import _exp_common as C
 from rscalib import calibrate_line_delay
 
 NAME = "exp_knots"

@@ -21,19 +21,24 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import machine_info, write_results  # noqa: E402
-
 import matplotlib  # noqa: E402
+from _common import machine_info, write_results  # noqa: E402
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from rscalib import _core  # noqa: E402
 from rscalib._core import CameraModel  # noqa: E402
-from rscalib.linear_interp import calibrate_line_delay_linear  # noqa: E402
-from rscalib.linedelay import calibrate_line_delay  # noqa: E402
-from rscalib.simulate import (HandheldTrajectory, SimCamera, calm_then_wild, checkerboard_points,  # noqa: E402
-                              simulate_observations, standoff_distance_m)
+from rscalib.linedelay.linear import calibrate_line_delay_linear  # noqa: E402
+from rscalib.linedelay.spline import calibrate_line_delay  # noqa: E402
+from rscalib.sim.target_observations import (  # noqa: E402
+    HandheldTrajectory,
+    SimCamera,
+    calm_then_wild,
+    checkerboard_points,
+    simulate_observations,
+    standoff_distance_m,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 D_TRUE_S = 30e-6

@@ -2,7 +2,7 @@
 
 Rendered 640x480, 30 fps, 10 s hand-held videos (9x6 checkerboard, supersample 2, noise 2 grey
 levels) at d = 30 and 60 us. `rscalib.localize` with the true d gives the continuous-time RS
-trajectory; its `frame_poses` are the per-frame global-shutter PnP poses (rscalib.pnp) it starts
+trajectory; its `frame_poses` are the per-frame global-shutter PnP poses (rscalib.linedelay.pnp) it starts
 from — the baseline. Both are compared with the analytic rendered trajectory:
 
 - GS PnP, pose placed at the frame timestamp t_i (what a GS pipeline does) and, fairer to it, at
@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import time
 
+import _exp_common as C
 import numpy as np
 
-import _exp_common as C
 from rscalib import _core, localize
 
 NAME = "exp_localize"

@@ -20,11 +20,11 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-
-import rscalib.selfcalib as selfcalib
 from _common import machine_info, write_results
 from exp_sog_vs_single import frames_for
-from rscalib.scene_render import render_scene_frames
+
+from rscalib.selfcalib import calibrate as selfcalib
+from rscalib.sim.scene_video import render_scene_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 AGE_BINS = [(1, 5), (5, 15), (15, 40), (40, 100), (100, 10 ** 6)]
@@ -82,7 +82,7 @@ def run(seed: int, frames: int, mode: str) -> dict:
     times, images, truth = frames_for(seed, frames)
     # Poses and per-pixel surface truth (cheap: no rendering of images).
     posed = render_scene_frames(num_frames=1, seed=seed)
-    from rscalib.scene_render import RoomWalkTrajectory
+    from rscalib.sim.scene_video import RoomWalkTrajectory
     R, p = RoomWalkTrajectory(seed=seed).pose_cw(times)
     posed.R_cw, posed.p_cw = np.asarray(R), np.asarray(p)
     recorder = _Recorder(posed, posed.camera, mode, np.random.default_rng([seed, 7]))

@@ -16,10 +16,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from _common import machine_info, write_results
-from rscalib.scene_render import render_scene_frames
-from rscalib.selfcalib import self_calibrate
+
+from rscalib.selfcalib.calibrate import self_calibrate
+from rscalib.sim.scene_video import render_scene_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "build" / "exp_videos"

@@ -21,9 +21,8 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 import _exp_common as C
+import numpy as np
 
 NAME = "exp_tables_bluefox"
 PIXELS_PER_LINE = 1650

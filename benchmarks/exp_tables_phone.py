@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import time
 
+import _exp_common as C
 import numpy as np
 
-import _exp_common as C
 from rscalib import calibrate_line_delay
 
 NAME = "exp_tables_phone"
@@ -59,7 +59,7 @@ def main() -> None:
                   f"J/2N {r['normalised_cost']:.3f}, sigma_px {r['pixel_sigma']:.3f}, {r['segments']} segments, "
                   f"{detection.frames_detected}/{detection.frames_total} frames", flush=True)
     table_rows, aggs = [], []
-    for name, size, d, duration, ss, paper_d, paper_sigma, paper_n in PHONES:
+    for name, size, d, duration, _ss, paper_d, paper_sigma, paper_n in PHONES:
         sel = [r for r in rows if r["phone"] == name]
         est = np.array([r["d_est_s"] for r in sel]) * 1e6
         agg = {"phone": name, "size": list(size), "nominal_us": d * 1e6, "videos": len(sel), "duration_s": duration,
@@ -70,7 +70,7 @@ def main() -> None:
                "median_normalised_cost": float(np.median([r["normalised_cost"] for r in sel])),
                "paper": {"d_us": paper_d, "sigma_us": paper_sigma, "N": paper_n, "video_length_s": "50-60"}}
         aggs.append(agg)
-        table_rows.append([name, f"30", f"{size[0]}×{size[1]}", f"{d * 1e6:.2f}", f"{len(sel)} × {duration:g} s",
+        table_rows.append([name, "30", f"{size[0]}×{size[1]}", f"{d * 1e6:.2f}", f"{len(sel)} × {duration:g} s",
                            f"{agg['median_us']:.3f}",
                            "–" if agg["std_of_estimates_us"] is None else f"{agg['std_of_estimates_us']:.3f}",
                            f"{agg['mean_sigma_us']:.3f}", f"{100 * agg['median_abs_rel_err']:.3f} %",
@@ -96,7 +96,7 @@ def figure(rows) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.5, 3.6), constrained_layout=True)
-    for k, (name, size, d, *_) in enumerate(PHONES):
+    for k, (name, _size, d, *_) in enumerate(PHONES):
         sel = [r for r in rows if r["phone"] == name]
         x = k + np.linspace(-0.2, 0.2, len(sel))
         ax.errorbar(x, [(r["d_est_s"] - d) * 1e6 for r in sel], yerr=[3 * r["std_s"] * 1e6 for r in sel],

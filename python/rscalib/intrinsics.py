@@ -18,10 +18,10 @@ import cv2
 import numpy as np
 
 from ._core import CameraModel
-from .camera import camera_from_opencv, opencv_matrices
-from .camera_io import write_opencv_yaml
-from .detect import DETECTOR_VERSION, DetectionResult
+from .detection.detectors import DETECTOR_VERSION
+from .detection.result import DetectionResult
 from .errors import InputError
+from .io.cameras import camera_from_opencv, opencv_matrices, write_opencv_yaml
 
 MODELS = ("pinhole-radtan", "pinhole-equidistant")
 PARAM_NAMES = {
@@ -250,7 +250,7 @@ def write_intrinsics(result: IntrinsicsResult, out_dir, detections: Optional[Det
                      extra: Optional[dict] = None) -> tuple[Path, Path]:
     """Write out_dir/camera.yaml (OpenCV FileStorage, camera_io.write_opencv_yaml) and
     out_dir/result.json. Returns both paths."""
-    from . import __version__
+    from ._version import __version__
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out} exists and is not a folder")

@@ -73,7 +73,7 @@ class Observations:
         bounds = np.searchsorted(self.frame_index[order], np.arange(self.num_frames + 1))
         return [order[bounds[i]:bounds[i + 1]] for i in range(self.num_frames)]
 
-    def subset_frames(self, keep: np.ndarray) -> "Observations":
+    def subset_frames(self, keep: np.ndarray) -> Observations:
         """Observations of the frames where `keep` (bool, (F,)) is true, re-indexed."""
         keep = np.asarray(keep, dtype=bool)
         new_index = np.cumsum(keep) - 1

@@ -1,0 +1,83 @@
+"""`rscalib demo`: render a rolling-shutter video of a checkerboard with a known line delay into
+a temporary folder, calibrate it end to end, print truth vs estimate and where the report is."""
+from __future__ import annotations
+
+import argparse
+import math
+import tempfile
+import time
+from pathlib import Path
+
+from .._version import __version__
+from .common import EXIT_OK
+
+
+def add_parser(sub) -> None:
+    demo = sub.add_parser("demo", help="run the built-in demonstration (no arguments needed)",
+                          description="Render a synthetic rolling-shutter video with a known line delay, "
+                                      "calibrate it (detection, trajectory, line delay, report) and print truth "
+                                      "vs estimate.")
+    demo.add_argument("--line-delay-us", type=float, default=30.0, help="true line delay in us/row (30)")
+    demo.add_argument("--duration", type=float, default=4.0, help="seconds of video (4)")
+    demo.add_argument("--seed", type=int, default=0, help="random seed of the motion and noise (0)")
+    demo.add_argument("--out", default=None, help="folder for the video and results (default: a new temp folder)")
+    demo.add_argument("--observations-only", action="store_true",
+                      help="skip rendering and detection: simulate corner observations directly (seconds)")
+    demo.set_defaults(func=run)
+
+
+def _round_printer(r) -> None:
+    print(f"  round {r.round}: {r.segments:4d} knot segments, d = {r.line_delay_s * 1e6:9.3f} us, "
+          f"J/2N = {r.normalised_cost:8.3f}, {r.segments_split} split ({r.solve_time_s:.2f} s)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from .._core import CameraModel
+    from ..linedelay.spline import calibrate_line_delay
+
+    started = time.perf_counter()
+    line_delay_s = args.line_delay_us * 1e-6
+    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="rscalib-demo-"))
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"rscalib {__version__} demo: {args.duration:g} s of hand-held 30 fps video of a 9x6 checkerboard, "
+          f"640x480, rolling shutter d = {args.line_delay_us:g} us/row")
+    if args.observations_only:
+        from ..sim import target_observations as simulate
+
+        sim = simulate.simulate_default(line_delay_s=line_delay_s, duration_s=args.duration, seed=args.seed)
+        c = sim.camera
+        camera = CameraModel(c.model, c.params, c.width, c.height)
+        observations, frames_total = sim.observations, sim.observations.num_frames
+        print(f"  simulated {observations.num_observations} corner observations (exact RS projection, 0.3 px noise)")
+    else:
+        from ..detection.pipeline import detect_video
+        from ..io.cameras import load_camera
+        from ..sim.target_video import render_video
+
+        print(f"  rendering into {out / 'video'} (every row at its own time) ...")
+        render_video(out / "video", line_delay_s=line_delay_s, duration_s=args.duration, seed=args.seed,
+                     supersample=2, progress=True)
+        camera = load_camera(out / "video" / "camera.yaml").camera
+        detection = detect_video(out / "video" / "video.avi", out / "video" / "target.yaml",
+                                 cache_dir=out / "cache", progress=True)
+        observations, frames_total = detection.observations, detection.frames_total
+        print(f"  detected the board in {detection.frames_detected} of {frames_total} frames "
+              f"({observations.num_observations} corners)")
+    result = calibrate_line_delay(observations, camera, progress=_round_printer)
+    error = result.line_delay_s - line_delay_s
+    std = result.line_delay_std_s
+    print(f"  truth     d = {line_delay_s * 1e6:.3f} us/row  (readout {line_delay_s * camera.height * 1e3:.3f} ms)")
+    print(f"  estimate  d = {result.line_delay_s * 1e6:.3f} +- {std * 1e6:.3f} us/row "
+          f"(readout {result.readout_time_s * 1e3:.3f} ms)")
+    if math.isfinite(std) and std > 0:
+        print(f"  error {error * 1e6:+.3f} us = {error / std:+.2f} sigma; pixel sigma {result.pixel_sigma:.3f} px "
+              f"(estimated), J/2N {result.normalised_cost:.3f}, rms {result.rms_px:.3f} px")
+    for w in result.warnings:
+        print(f"  warning: {w}")
+    if not args.observations_only:
+        from ..linedelay.report import write_outputs
+
+        write_outputs(result, camera, out / "result", frames_total=frames_total, fps=30.0)
+        print(f"  report: {out / 'result' / 'report.html'}")
+    print(f"  took {time.perf_counter() - started:.1f} s")
+    return EXIT_OK

@@ -1,0 +1,118 @@
+"""`rscalib flicker`: line delay from the bands of a light flickering at a known frequency (SPEC §5).
+
+Exit codes: 0 determined; 2 bad input (missing file, frequency <= 0, bad region...); 3 the data do
+not determine the line delay — no flicker bands found, aliasing, or too uncertain — with
+result.json and the plot still written and the reason in its `warnings`. "No flicker" is exit 3,
+not 2: the input is valid, it just does not contain the answer.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .common import EXIT_OK, EXIT_UNDETERMINED
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("flicker", help="line delay from the bands of a light flickering at a known frequency",
+                       description="Estimate the rolling-shutter line delay d from the horizontal bands that a "
+                                   "light flickering at a known frequency paints on the image (period 1/(f d) "
+                                   "rows). With frame timestamps (videos, timestamps.txt) a joint fit of the "
+                                   "phase drift between frames works even for less than one period per frame "
+                                   "(mains flicker); without, the bands' spectrum needs a few periods per "
+                                   "frame. Writes result.json and flicker.png. Exit 3 if the data do not "
+                                   "determine d (no bands, aliasing), with the reason in result.json.")
+    p.add_argument("source", metavar="IMAGES_OR_VIDEO",
+                   help="video file, or a folder of images (file-name order, optional timestamps.txt)")
+    p.add_argument("--frequency", type=float, required=True, metavar="HZ",
+                   help="the light's intensity frequency in Hz (twice the mains frequency for mains lamps: 100 or 120)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    p.add_argument("--rows", type=int, default=None, help="sensor rows read out, for the readout time "
+                                                         "(default: image height)")
+    p.add_argument("--roi", default=None, metavar="x,y,w,h",
+                   help="region whose columns are averaged (default: the whole image)")
+    p.add_argument("--max-frames", type=int, default=None, metavar="N", help="use the first N readable frames")
+    p.add_argument("--method", choices=["auto", "spectrum", "phase-drift"], default="auto",
+                   help="auto (phase drift when the frames have timestamps, else spectrum), spectrum, phase-drift")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.set_defaults(func=run)
+
+
+def _check(args) -> None:
+    if not (math.isfinite(args.frequency) and args.frequency > 0):
+        raise InputError(f"--frequency must be a positive number of Hz (got {args.frequency:g})")
+    if args.rows is not None and args.rows <= 0:
+        raise InputError("--rows must be positive")
+    if args.max_frames is not None and args.max_frames < 1:
+        raise InputError("--max-frames must be >= 1")
+    if not Path(args.source).exists():
+        raise InputError(f"not found: {args.source}")
+
+
+def plot_flicker(result, path: Path) -> None:
+    """Row profiles with the fitted flicker model, and the per-frame (or per-block) estimates."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), dpi=90)
+    ax = axes[0]
+    plot = result.plot
+    if plot.get("observed") is not None:
+        for k, frame in enumerate(plot["frames"]):
+            offset = 2.5 * k * max(result.modulation_depth, 0.02) if math.isfinite(result.modulation_depth) else 0.0
+            line, = ax.plot(plot["rows_v"], plot["observed"][k] + offset, ".", ms=1.5, alpha=0.5)
+            ax.plot(plot["rows_v"], plot["model"][k] + offset, "-", lw=1.0, color=line.get_color(),
+                    label=f"frame {frame}")
+        ax.legend(fontsize=7, loc="upper right")
+    ax.set_xlabel("image row v")
+    ax.set_ylabel("log row profile - scene (offset)")
+    ax.set_title(f"{result.frequency_hz:g} Hz: period {result.period_rows:.1f} rows ({result.method})", fontsize=9)
+
+    ax = axes[1]
+    spread = np.asarray(result.spread_line_delays_s) * 1e6
+    if len(spread):
+        ax.plot(np.arange(len(spread)), spread, "o", ms=3, label=f"per {result.spread_label}")
+    if math.isfinite(result.line_delay_s):
+        d_us, s_us = result.line_delay_s * 1e6, result.line_delay_std_s * 1e6
+        ax.axhline(d_us, color="k", lw=1, label=f"d = {d_us:.5g} us/row")
+        if math.isfinite(s_us):
+            ax.axhspan(d_us - s_us, d_us + s_us, color="k", alpha=0.15, label="±1 std")
+        ax.legend(fontsize=7)
+    ax.set_xlabel(result.spread_label)
+    ax.set_ylabel("line delay (us/row)")
+    ax.ticklabel_format(axis="y", useOffset=False)
+    ax.set_title("estimates" + ("" if result.determined else " (NOT determined)"), fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..flicker.estimate import estimate_line_delay_flicker
+
+    _check(args)
+    result = estimate_line_delay_flicker(args.source, args.frequency, rows=args.rows, roi=args.roi,
+                                         max_frames=args.max_frames, method=args.method, progress=not args.quiet)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = result.summary_dict() | {"source": str(args.source)}
+    (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
+    plot_flicker(result, out / "flicker.png")
+    if result.determined:
+        print(f"line delay {result.line_delay_s * 1e6:.5f} +- {result.line_delay_std_s * 1e6:.5f} us/row, "
+              f"readout {result.readout_time_s * 1e3:.4f} ms ({result.method}, {result.frames_used} frames, "
+              f"band period {result.period_rows:.2f} rows)")
+    else:
+        print("line delay not determined by the data" + (
+            f" (best guess {result.line_delay_s * 1e6:.4f} us/row)" if math.isfinite(result.line_delay_s) else ""))
+    for w in result.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    print(f"results: {out / 'result.json'}")
+    return EXIT_OK if result.determined else EXIT_UNDETERMINED

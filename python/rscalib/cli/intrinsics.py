@@ -1,0 +1,76 @@
+"""`rscalib intrinsics`: intrinsic calibration from stills or a video of a target (SPEC §3, §5)."""
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+
+from .common import EXIT_OK
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser(
+        "intrinsics", help="calibrate intrinsics and distortion from images or a video of a target",
+        description="Intrinsic calibration with OpenCV from still images (files, a glob or a folder) or a "
+                    "video of a calibration target. Writes OUT/camera.yaml and OUT/result.json.")
+    p.add_argument("inputs", nargs="+", metavar="IMAGES_OR_VIDEO",
+                   help="a video, an image folder, or image files (shell glob or quoted pattern)")
+    p.add_argument("--target", required=True, metavar="TARGET.yaml", help="Kalibr-style target file")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--model", choices=["pinhole-radtan", "pinhole-equidistant"], default="pinhole-radtan",
+                   help="camera model (pinhole-radtan)")
+    p.add_argument("--max-views", type=int, default=40, metavar="N",
+                   help="use at most N views, chosen sharp and well spread (40)")
+    p.add_argument("--workers", type=int, default=None, metavar="N", help="detection processes (all cores)")
+    p.add_argument("--max-blur-px", type=float, default=None, metavar="PX",
+                   help="drop frames whose edges are wider than this (8)")
+    p.add_argument("--subpix-window", type=int, default=None, metavar="PX",
+                   help="cornerSubPix half-window (default: a quarter of the grid step; OpenCV's sample uses 11)")
+    p.add_argument("--no-cache", action="store_true", help="detect again even if cached detections exist")
+    p.add_argument("--cache-dir", default=None, metavar="DIR", help="detection cache (~/.cache/rscalib/detections)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..detection.detectors import DetectOptions
+    from ..detection.pipeline import detect_video
+    from ..errors import InputError
+    from ..intrinsics import calibrate_intrinsics, write_intrinsics
+    from ..io.targets import load_target
+
+    if args.max_views < 3:
+        raise InputError("--max-views must be at least 3")
+    if args.workers is not None and args.workers < 1:
+        raise InputError("--workers must be at least 1")
+    target = load_target(args.target)
+    options = DetectOptions()
+    if args.max_blur_px is not None:
+        if not args.max_blur_px > 0:
+            raise InputError("--max-blur-px must be positive")
+        options = replace(options, max_blur_px=args.max_blur_px)
+    if args.subpix_window is not None:
+        if args.subpix_window < 1:
+            raise InputError("--subpix-window must be at least 1")
+        options = replace(options, subpix_window_px=args.subpix_window)
+    source = args.inputs[0] if len(args.inputs) == 1 else args.inputs
+    detections = detect_video(source, target, workers=args.workers, cache=not args.no_cache,
+                              cache_dir=args.cache_dir, progress=not args.quiet, options=options)
+    result = calibrate_intrinsics(detections, model=args.model, max_views=args.max_views)
+    camera_path, json_path = write_intrinsics(result, args.out, detections,
+                                              extra={"target": {"target_type": target.target_type, **target.spec},
+                                                     "inputs": [str(i) for i in args.inputs]})
+
+    dropped = ", ".join(f"{n} {r.replace('_', ' ')}" for r, n in sorted(detections.dropped.items())) or "none"
+    cached = " (cached)" if detections.from_cache else ""
+    print(f"{target.describe()}: {detections.frames_total} frames, {detections.frames_detected} with the target"
+          f"{cached}; dropped: {dropped}; {len(result.view_index)} views used")
+    print(f"  {result.model}, {result.camera.width}x{result.camera.height}, RMS {result.rms_px:.3f} px")
+    for name, value, std in zip(result.param_names, result.params, result.param_std):
+        unit = " px" if name in ("fx", "fy", "cx", "cy") else ""
+        print(f"  {name:>3} = {value:12.6g} +- {std:.3g}{unit}")
+    worst = sorted(zip(result.view_rms_px, result.view_labels), reverse=True)[:3]
+    print("  largest per-view RMS: " + ", ".join(f"{label} {e:.3f} px" for e, label in worst))
+    for warning in detections.warnings + result.warnings:
+        print(f"  warning: {warning}")
+    print(f"  wrote {camera_path} and {json_path}")
+    return EXIT_OK

@@ -1,0 +1,155 @@
+"""Row profiles of frames for the flicker method: the mean grey of each row over column strips,
+leaving out strips that clip in any frame (a clipped pixel does not follow the light)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from .._progress import Progress
+from ..errors import InputError
+
+MIN_ROWS = 16
+STRIPS = 32                      # column strips per row, for leaving out clipped pixels
+
+
+@dataclass
+class RowProfiles:
+    """Row profiles of a frame sequence: mean grey over the region's columns, one row per image row."""
+
+    values: np.ndarray                  # (frames, rows) linear grey levels; NaN: no unclipped pixels
+    rows_v: np.ndarray                  # (rows,) image row of each column of `values`
+    times_s: Optional[np.ndarray]       # (frames,) time of row 0; None when unknown
+    image_size: tuple                   # (width, height)
+    full_scale: Optional[float] = None  # saturation level of integer images
+    frames_total: int = 0
+    frames_skipped: int = 0
+    timestamps_source: str = "given"
+    roi: Optional[tuple] = None
+    warnings: list = field(default_factory=list)
+
+
+def _parse_roi(roi, width: int, height: int) -> tuple[slice, slice, Optional[tuple]]:
+    if roi is None:
+        return slice(0, height), slice(0, width), None
+    if isinstance(roi, str):
+        parts = roi.replace(" ", "").split(",")
+    else:
+        parts = list(roi)
+    try:
+        x, y, w, h = (int(round(float(c))) for c in parts)
+    except (TypeError, ValueError):
+        raise InputError(f"bad region {roi!r}: give x,y,w,h in pixels") from None
+    if w <= 0 or h <= 0 or x < 0 or y < 0 or x + w > width or y + h > height:
+        raise InputError(f"region {x},{y},{w},{h} is not inside the {width}x{height} image")
+    if h < MIN_ROWS:
+        raise InputError(f"region has {h} rows; at least {MIN_ROWS} are needed")
+    return slice(y, y + h), slice(x, x + w), (x, y, w, h)
+
+
+def _gray(image: np.ndarray) -> np.ndarray:
+    image = np.asarray(image)
+    if image.ndim == 3:
+        return image.mean(axis=2)  # channel order does not matter for a gain
+    if image.ndim != 2:
+        raise InputError(f"a frame must be a 2-D (grey) or 3-D (colour) array, got shape {image.shape}")
+    return image
+
+
+def read_row_profiles(frames: Any, timestamps_s: Optional[Sequence[float]] = None, roi=None,
+                      max_frames: Optional[int] = None, progress: bool = False) -> RowProfiles:
+    """Row profiles of frames: an array (H, W) / (N, H, W) / (N, H, W, C), a list of arrays, a
+    :class:`rscalib.io.video.FrameSource`, or anything :func:`rscalib.io.video.open_source` reads (video,
+    image folder with optional timestamps.txt, image files). ``max_frames``: the first N usable frames.
+    Image folders without timestamps.txt have no known times (the phase-drift method needs them)."""
+    if max_frames is not None and int(max_frames) < 1:
+        raise InputError("max frames must be >= 1")
+    if isinstance(frames, np.ndarray) or (isinstance(frames, (list, tuple)) and len(frames) > 0
+                                          and isinstance(frames[0], np.ndarray)):
+        stack = [frames] if isinstance(frames, np.ndarray) and frames.ndim == 2 else list(frames)
+        if isinstance(frames, np.ndarray) and frames.ndim not in (2, 3, 4):
+            raise InputError(f"frames must be (H, W), (N, H, W) or (N, H, W, C), got shape {frames.shape}")
+        return _profiles(iter((i, None, img) for i, img in enumerate(stack)), len(stack), timestamps_s,
+                         roi, max_frames, progress, "given" if timestamps_s is not None else "none")
+
+    from ..io.video import FrameSource, open_source
+    source = frames if isinstance(frames, FrameSource) else open_source(frames)
+    times_known = source.timestamps_source != "frame index"
+
+    def items():
+        for frame in source.frames(gray=True):
+            yield frame.index, (frame.time_s if frame.problem is None else None), frame.image if frame.problem is None else None
+
+    result = _profiles(items(), source.frame_count_estimate, timestamps_s, roi, max_frames, progress,
+                       source.timestamps_source, source_times=times_known)
+    result.warnings[:0] = list(source.warnings)
+    if not times_known and timestamps_s is None:
+        result.times_s = None
+        result.timestamps_source = "none"
+        result.warnings.append("no frame timestamps (image folder without timestamps.txt): the phase-drift "
+                               "method is unavailable")
+    return result
+
+
+def _profiles(items, total, timestamps_s, roi, max_frames, progress, timestamps_source,
+              source_times: bool = False) -> RowProfiles:
+    # Columns are averaged in strips, and a strip is left out of a row when it clips (full scale or
+    # 0) in any frame: a clipped pixel does not follow the light, and the same strips must be used
+    # in every frame for the scene to cancel.
+    strips, clipped, times, size, full_scale, rows_slice, cols_slice, roi_used = [], None, [], None, None, None, None, None
+    edges = None
+    seen, skipped = 0, 0
+    limit = int(max_frames) if max_frames is not None else None
+    with Progress(progress, total if limit is None else min(limit, total or limit), "reading frames") as bar:
+        for _, time_s, image in items:
+            seen += 1
+            if image is None:
+                skipped += 1
+                continue
+            gray = _gray(image)
+            if size is None:
+                size = (gray.shape[1], gray.shape[0])
+                rows_slice, cols_slice, roi_used = _parse_roi(roi, *size)
+                if np.issubdtype(gray.dtype, np.integer):
+                    full_scale = float(np.iinfo(gray.dtype).max)
+                elif np.issubdtype(np.asarray(image).dtype, np.integer):
+                    full_scale = float(np.iinfo(np.asarray(image).dtype).max)
+            elif (gray.shape[1], gray.shape[0]) != size:
+                raise InputError(f"frame {seen - 1} is {gray.shape[1]}x{gray.shape[0]}, the first was "
+                                 f"{size[0]}x{size[1]}")
+            block = np.asarray(gray[rows_slice, cols_slice])
+            if edges is None:
+                count = max(1, min(STRIPS, block.shape[1] // 8))
+                edges = np.linspace(0, block.shape[1], count + 1).round().astype(int)[:-1]
+                widths = np.diff(np.append(edges, block.shape[1])).astype(np.float64)
+                clipped = np.zeros((block.shape[0], len(edges)), dtype=bool)
+            strips.append((np.add.reduceat(block, edges, axis=1, dtype=np.float64) / widths).astype(np.float32))
+            if full_scale is not None:
+                clipped |= np.maximum.reduceat(block, edges, axis=1) >= full_scale
+                clipped |= np.minimum.reduceat(block, edges, axis=1) <= 0
+            times.append(time_s)
+            bar.advance()
+            if limit is not None and len(strips) >= limit:
+                break
+    if not strips:
+        raise InputError("no readable frame" + (f" ({skipped} unreadable)" if skipped else ""))
+    if size[1] < MIN_ROWS:
+        raise InputError(f"images have {size[1]} rows; at least {MIN_ROWS} are needed")
+    times_s = None
+    if timestamps_s is not None:
+        given = np.asarray(timestamps_s, dtype=np.float64).ravel()
+        if len(given) < len(strips):
+            raise InputError(f"{len(given)} timestamps for {len(strips)} frames")
+        times_s = given[:len(strips)]
+        timestamps_source = "given"
+    elif source_times:
+        times_s = np.asarray(times, dtype=np.float64)
+    if times_s is not None and (not np.all(np.isfinite(times_s)) or np.any(np.diff(times_s) <= 0)):
+        raise InputError("frame timestamps must be finite and strictly increasing")
+    keep = (~clipped) * widths[None, :]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        values = np.einsum("nrs,rs->nr", np.array(strips, dtype=np.float64), keep) / keep.sum(axis=1)
+    return RowProfiles(values=values, rows_v=np.arange(size[1], dtype=np.float64)[rows_slice],
+                       times_s=times_s, image_size=size, full_scale=full_scale, frames_total=seen,
+                       frames_skipped=skipped, timestamps_source=timestamps_source, roi=roi_used)

@@ -1,0 +1,234 @@
+"""Frames with timestamps from a video file, an image folder or a list of images (streaming).
+
+Videos are read with OpenCV's FFmpeg backend. A frame's time is the container's presentation
+time (CAP_PROP_POS_MSEC after each grab), so variable frame rates need nothing special; a
+frame whose time does not increase is skipped (`bad_timestamp`). Only when the container has no
+times at all (every frame reports 0) do times fall back to index / fps, with a warning.
+Image folders are read in file-name order (numbers compared by value, so frame2 < frame10),
+with times from `timestamps.txt` in the folder (one time in seconds per line, in that order)
+or else the image index (0, 1, 2, ... s). Nothing is kept in memory between frames.
+"""
+from __future__ import annotations
+
+import glob
+import hashlib
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator, Optional, Sequence, Union
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pbm", ".webp", ".jp2")
+TIMESTAMPS_FILE = "timestamps.txt"
+
+
+@dataclass
+class Frame:
+    """One frame: index in the source, time of row 0 (s), pixels (None if the frame is unusable,
+    with the reason in `problem`: "unreadable" or "bad_timestamp"), and a label for reports."""
+
+    index: int
+    time_s: float
+    image: Optional[np.ndarray]
+    label: str
+    problem: Optional[str] = None
+
+
+@dataclass
+class FrameSource:
+    """A video or an image sequence; `frames()` decodes lazily, one frame at a time."""
+
+    kind: str                                   # "video" | "images"
+    paths: list                                 # the video, or the images in order
+    timestamps_source: str                      # "container" | "frame rate" | "timestamps file" | "frame index"
+    frame_count_estimate: Optional[int] = None  # from the container for videos (may be off)
+    fps_nominal: Optional[float] = None
+    times_s: Optional[np.ndarray] = None        # image sequences: the time of every image
+    warnings: list = field(default_factory=list)
+
+    def frames(self, gray: bool = False) -> Iterator[Frame]:
+        if self.kind == "images":
+            yield from self._images(gray)
+        else:
+            yield from self._video(gray)
+
+    def content_hash(self) -> str:
+        """SHA-256 of the bytes (streamed) of the video, or of every image and the timestamps."""
+        digest = hashlib.sha256()
+        for path in self.paths:
+            digest.update(f"{os.path.getsize(path)}\0".encode())
+            with open(path, "rb") as stream:
+                for chunk in iter(lambda: stream.read(1 << 22), b""):
+                    digest.update(chunk)
+        if self.kind == "images":
+            digest.update(np.asarray(self.times_s, dtype=np.float64).tobytes())
+        return digest.hexdigest()
+
+    def _images(self, gray: bool) -> Iterator[Frame]:
+        flag = cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR
+        for index, path in enumerate(self.paths):
+            image = cv2.imread(str(path), flag)
+            yield Frame(index, float(self.times_s[index]), image, Path(path).name,
+                        None if image is not None else "unreadable")
+
+    def _video(self, gray: bool) -> Iterator[Frame]:
+        capture = _open_capture(self.paths[0])
+        clock = _ContainerClock(self.fps_nominal)
+        index = -1
+        try:
+            while capture.grab():
+                index += 1
+                time_s = clock.time_of(index, capture.get(cv2.CAP_PROP_POS_MSEC))
+                if time_s is None:
+                    yield Frame(index, float("nan"), None, f"frame {index}", "bad_timestamp")
+                    continue
+                ok, image = capture.retrieve()
+                if not ok or image is None:
+                    yield Frame(index, time_s, None, f"frame {index}", "unreadable")
+                    continue
+                if gray and image.ndim == 3:
+                    image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+                yield Frame(index, time_s, image, f"frame {index}")
+        finally:
+            capture.release()
+        if index < 0:
+            raise InputError(f"{self.paths[0]}: no frame could be decoded")
+        if clock.fallback and clock.warning not in self.warnings:
+            self.warnings.append(clock.warning)
+            self.timestamps_source = "frame rate"
+        skipped = f"{clock.non_increasing} frame(s) skipped: container time not increasing"
+        if clock.non_increasing and skipped not in self.warnings:
+            self.warnings.append(skipped)
+
+
+class _ContainerClock:
+    """Frame times from CAP_PROP_POS_MSEC: checked to increase; index / fps if all are 0."""
+
+    def __init__(self, fps: Optional[float]):
+        self.fps = fps if fps and np.isfinite(fps) and fps > 0 else None
+        self.fallback = False
+        self.last: Optional[float] = None
+        self.non_increasing = 0
+        self.warning = ""
+
+    def time_of(self, index: int, pos_msec: float) -> Optional[float]:
+        if index == 1 and self.last == 0.0 and pos_msec == 0.0:
+            # OpenCV reports 0 for frames without a presentation time: the container has none.
+            self.fallback = True
+            rate = f"{self.fps:g} fps" if self.fps else "1 fps (unknown frame rate)"
+            self.warning = f"the video has no frame timestamps; using frame index / {rate}"
+        if self.fallback:
+            self.last = index / (self.fps or 1.0)
+            return self.last
+        time_s = pos_msec * 1e-3
+        if not np.isfinite(time_s) or (self.last is not None and time_s <= self.last):
+            self.non_increasing += 1
+            return None
+        self.last = time_s
+        return time_s
+
+
+def _open_capture(path) -> cv2.VideoCapture:
+    """VideoCapture with FFmpeg, without console noise: problems become our InputError; FFmpeg's
+    own messages stay off unless OPENCV_FFMPEG_LOGLEVEL is set (read when FFmpeg starts)."""
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # "can't capture by name" warnings
+    try:
+        capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+    if not capture.isOpened():
+        capture.release()
+        raise InputError(f"{path}: cannot open as a video (not a video file, or a codec FFmpeg lacks)")
+    return capture
+
+
+def _natural_key(path) -> list:
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", Path(path).name)]
+
+
+def _is_image(path) -> bool:
+    return Path(path).suffix.lower() in IMAGE_EXTENSIONS
+
+
+def read_timestamps(path, count: int) -> np.ndarray:
+    """Times (s) from a timestamps file: one number per line (blank lines and # comments skipped)."""
+    values = []
+    for number, line in enumerate(Path(path).read_text(errors="replace").splitlines(), start=1):
+        text = line.split("#", 1)[0].strip()
+        if not text:
+            continue
+        try:
+            values.append(float(text.split()[0].rstrip(",")))
+        except ValueError:
+            raise InputError(f"{path}:{number}: not a time in seconds: {line.strip()[:40]!r}") from None
+    times = np.asarray(values, dtype=np.float64)
+    if len(times) != count:
+        raise InputError(f"{path}: {len(times)} timestamps for {count} images (need one per image)")
+    if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+        raise InputError(f"{path}: timestamps must be finite and strictly increasing")
+    return times
+
+
+def open_source(source: Union[str, Path, Sequence]) -> FrameSource:
+    """A video file, an image folder, an image file, a glob pattern, or a list of image files."""
+    if isinstance(source, (str, Path)):
+        items = [source]
+    else:
+        items = list(source)
+    if not items:
+        raise InputError("no input images or video given")
+    paths: list[Path] = []
+    for item in items:
+        path = Path(item)
+        if not path.exists() and any(ch in str(item) for ch in "*?["):
+            matches = sorted(glob.glob(str(item)), key=_natural_key)
+            if not matches:
+                raise InputError(f"no files match {item}")
+            paths.extend(Path(m) for m in matches)
+        elif not path.exists():
+            raise InputError(f"not found: {item}")
+        else:
+            paths.append(path)
+    if len(paths) == 1 and paths[0].is_dir():
+        return _folder(paths[0])
+    if len(paths) == 1 and not _is_image(paths[0]):
+        return _video_source(paths[0])
+    for path in paths:
+        if path.is_dir():
+            raise InputError(f"{path}: give one folder, one video, or image files — not a mix")
+        if not _is_image(path):
+            raise InputError(f"{path}: not an image ({', '.join(IMAGE_EXTENSIONS)}); a video must come alone")
+    return FrameSource("images", paths, "frame index", len(paths), None, np.arange(len(paths), dtype=np.float64))
+
+
+def _folder(folder: Path) -> FrameSource:
+    images = sorted((p for p in folder.iterdir() if p.is_file() and _is_image(p)), key=_natural_key)
+    if not images:
+        raise InputError(f"{folder}: no images ({', '.join(IMAGE_EXTENSIONS)}) in the folder")
+    stamps = folder / TIMESTAMPS_FILE
+    if stamps.is_file():
+        return FrameSource("images", images, "timestamps file", len(images), None, read_timestamps(stamps, len(images)))
+    return FrameSource("images", images, "frame index", len(images), None, np.arange(len(images), dtype=np.float64))
+
+
+def _video_source(path: Path) -> FrameSource:
+    if not path.is_file():
+        raise InputError(f"{path}: not a file")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: empty file")
+    capture = _open_capture(path)
+    try:
+        count = capture.get(cv2.CAP_PROP_FRAME_COUNT)
+        fps = capture.get(cv2.CAP_PROP_FPS)
+    finally:
+        capture.release()
+    count = int(count) if count and np.isfinite(count) and count > 0 else None
+    fps = float(fps) if fps and np.isfinite(fps) and fps > 0 else None
+    return FrameSource("video", [path], "container", count, fps)

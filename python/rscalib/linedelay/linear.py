@@ -1,0 +1,220 @@
+"""Baseline line-delay estimation with a per-frame pose trajectory (Hedborg et al. 2012).
+
+One pose T_cw per frame, at the frame's row-0 time t_k; between two consecutive frames the
+camera centre moves linearly and the rotation along the geodesic (SLERP). An observation of
+frame k at row v is taken at t = t_k + v d. The poses and d are estimated jointly by Ceres
+(rscalib._core.solve_line_delay_linear, cpp/include/rscalib/rs/linear_interp_cost.hpp) from
+the plain reprojection errors divided by the pixel sigma.
+
+Gaps: frames further apart than 1.5 median frame intervals (frames without detections or
+without a PnP pose in between) are not interpolated between. The observations of the last
+frame of a run of consecutive frames use the pair before it, extrapolated past s = 1 (the
+first frame's, for a negative d, the pair after it); a frame with no neighbour is dropped.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .. import _core
+from .._core import CameraModel
+from ..errors import InputError
+from ..observations import Observations
+from .common import UNDETERMINED_STD_FRACTION, check_inputs, choose_pixel_sigma, frame_rate_hz, seed_poses
+from .pnp import FramePoses
+
+TRAJECTORY_MODEL = "linear"
+
+
+@dataclass
+class LinearInterpResult:
+    """Result of calibrate_line_delay_linear. Times in s, pixels in px."""
+
+    line_delay_s: float
+    line_delay_std_s: float
+    readout_time_s: float
+    rows: int
+    frame_times_s: np.ndarray         # (F,) row-0 times of the used frames
+    frame_poses: np.ndarray           # (F, 6) T_cw [p; phi] at frame_times_s
+    linked_to_next: np.ndarray        # (F,) bool: frame k and k + 1 are interpolated between
+    max_frame_interval_s: float
+    rms_px: float
+    normalised_cost: float            # J / 2N with the weights used
+    pixel_sigma: float
+    pixel_sigma_source: str
+    converged: bool
+    determined: bool
+    warnings: list[str]
+    frames_total: int
+    frames_used: int
+    observations: int                 # 2-D errors in the solve
+    isolated_observations: int        # dropped: their frame has no neighbour
+    extrapolated_observations: int    # chain ends: the neighbouring pair, extrapolated
+    num_chains: int
+    initial_line_delay_s: float
+    solve_time_s: float
+    observation_time_s: np.ndarray    # (M,) t_k + v d
+    residual_px: np.ndarray           # (M, 2) y - pi(...), NaN where not used
+    standardised_sq: np.ndarray       # (M,)
+    gs_poses: FramePoses              # the per-frame GS PnP initial guess
+    used_observations: Observations = field(repr=False)
+    trajectory_model: str = TRAJECTORY_MODEL
+
+    @property
+    def num_segments(self) -> int:
+        return int(np.count_nonzero(self.linked_to_next))
+
+    def pose_at(self, t_s) -> tuple[np.ndarray, np.ndarray]:
+        """T_cw at times t: R (n, 3, 3), p (n, 3), x_c = R x_w + p. Interpolated between
+        linked frames; up to max_frame_interval_s past a chain's end (before its start)
+        extrapolated with its last (first) pair, as the solver does; NaN elsewhere."""
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).reshape(-1)
+        times, poses, linked = self.frame_times_s, self.frame_poses, self.linked_to_next
+        count = len(times)
+        k = np.clip(np.searchsorted(times, t, side="right") - 1, -1, count - 1)
+        first = np.full(len(t), -1)
+        inside = (k >= 0) & linked[np.maximum(k, 0)]
+        first[inside] = k[inside]
+        after_end = ~inside & (k >= 1) & linked[np.maximum(k - 1, 0)] & (t - times[np.maximum(k, 0)] <= self.max_frame_interval_s)
+        first[after_end] = k[after_end] - 1
+        nxt = np.minimum(k + 1, count - 1)
+        before_start = (first < 0) & (k + 1 < count) & linked[nxt] & (times[nxt] - t <= self.max_frame_interval_s)
+        first[before_start] = nxt[before_start]
+        rotations = np.full((len(t), 3, 3), np.nan)
+        translations = np.full((len(t), 3), np.nan)
+        ok = first >= 0
+        if np.any(ok):
+            a = first[ok]
+            s = (t[ok] - times[a]) / (times[a + 1] - times[a])
+            r_a = Rotation.from_rotvec(poses[a, 3:])
+            r_b = Rotation.from_rotvec(poses[a + 1, 3:])
+            relative = (r_a.inv() * r_b).as_rotvec()          # |.| <= pi: the short way
+            r_s = r_a * Rotation.from_rotvec(s[:, None] * relative)
+            centre_a = -r_a.inv().apply(poses[a, :3])
+            centre_b = -r_b.inv().apply(poses[a + 1, :3])
+            centre = (1.0 - s)[:, None] * centre_a + s[:, None] * centre_b
+            rotations[ok] = r_s.as_matrix()
+            translations[ok] = -r_s.apply(centre)
+        return rotations, translations
+
+    def evaluate(self, t_s) -> np.ndarray:
+        """(n, 6) states [p; phi] at times t (rotation vectors unwrapped over the finite rows,
+        as the spline's state), NaN where pose_at is."""
+        rotations, translations = self.pose_at(t_s)
+        out = np.full((len(translations), 6), np.nan)
+        ok = np.isfinite(translations[:, 0])
+        if np.any(ok):
+            out[ok, :3] = translations[ok]
+            out[ok, 3:] = _core.unwrap_rotation_vectors(Rotation.from_matrix(rotations[ok]).as_rotvec())
+        return out
+
+    def summary_dict(self) -> dict:
+        """JSON-ready fields, the keys of LineDelayResult.summary_dict where they apply.
+        knots: the frame poses (the interpolant's knots); segments: interpolated intervals."""
+        std = self.line_delay_std_s
+        return {
+            "trajectory_model": self.trajectory_model,
+            "line_delay_s": self.line_delay_s,
+            "line_delay_std_s": std if math.isfinite(std) else None,
+            "readout_time_s": self.readout_time_s,
+            "rows": self.rows,
+            "frames_total": self.frames_total,
+            "frames_used": self.frames_used,
+            "observations": self.observations,
+            "knots": int(len(self.frame_times_s)),
+            "segments": self.num_segments,
+            "chains": self.num_chains,
+            "isolated_observations": self.isolated_observations,
+            "extrapolated_observations": self.extrapolated_observations,
+            "max_frame_interval_s": self.max_frame_interval_s,
+            "rms_px": self.rms_px,
+            "normalised_cost": self.normalised_cost,
+            "pixel_sigma": self.pixel_sigma,
+            "pixel_sigma_source": self.pixel_sigma_source,
+            "converged": self.converged,
+            "determined": self.determined,
+            "warnings": list(self.warnings),
+            "initial_line_delay_s": self.initial_line_delay_s,
+            "solve_time_s": self.solve_time_s,
+        }
+
+
+def calibrate_line_delay_linear(observations: Observations, camera: CameraModel, rows: Optional[int] = None, *,
+                                pixel_sigma: Optional[float] = None,
+                                line_delay0_s: Optional[float] = None,
+                                standardise_errors: bool = False,
+                                max_frame_interval_s: Optional[float] = None,
+                                robust_loss: str = "none",
+                                num_threads: int = 2) -> LinearInterpResult:
+    """Line delay d (s/row) with the per-frame linear/SLERP trajectory (the baseline).
+
+    Same inputs as rscalib.calibrate_line_delay. standardise_errors: weight with A R A^T as
+    the spline model does (default False: the plain method). max_frame_interval_s: frames
+    further apart are not interpolated between (default 1.5 median frame intervals).
+    """
+    started = time.perf_counter()
+    rows = check_inputs(observations, camera, rows)
+    warnings: list[str] = []
+    fps = frame_rate_hz(observations)
+    nominal_delay_s = 1.0 / (fps * rows)
+    d = float(nominal_delay_s if line_delay0_s is None else line_delay0_s)
+    if not math.isfinite(d):
+        raise InputError("line_delay0_s must be a finite number")
+    if max_frame_interval_s is None:
+        max_frame_interval_s = 1.5 / fps
+    if not max_frame_interval_s > 0:
+        raise InputError("max_frame_interval_s must be positive")
+    initial_d = d
+
+    frames_total = observations.num_frames
+    used, gs = seed_poses(observations, camera, warnings, min_frames=2)
+    sigma, sigma_source = choose_pixel_sigma(used, pixel_sigma)
+
+    options = _core.LinearInterpOptions()
+    options.pixel_sigma = sigma
+    options.standardise_errors = bool(standardise_errors)
+    options.max_frame_interval_s = float(max_frame_interval_s)
+    options.robust_loss = robust_loss
+    options.num_threads = int(num_threads)
+    initial_poses = np.c_[gs.translation, gs.rotation_vector]
+    summary, refined = _core.solve_line_delay_linear(used.frame_index.astype(np.int32), used.uv, used.points_w(),
+                                                     used.frame_times_s, camera, initial_poses, d, options)
+    d = summary.line_delay_s
+    std = summary.line_delay_std_s
+    frame_times = used.frame_times_s
+    linked = np.zeros(len(frame_times), dtype=bool)
+    linked[:-1] = np.diff(frame_times) <= summary.max_frame_interval_s
+
+    cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
+    if sigma_source == "residuals":
+        sigma = summary.rms_px
+        warnings.append("pixel sigma could not be estimated from the target grid; using the residual RMS "
+                        f"({sigma:.3f} px), so J/2N carries no information")
+    determined = bool(summary.covariance_ok and math.isfinite(std) and std < UNDETERMINED_STD_FRACTION * nominal_delay_s)
+    if not determined:
+        warnings.append("the line delay is not determined by this data (too little or the wrong kind of "
+                        f"motion): sigma_d = {std * 1e6 if math.isfinite(std) else float('inf'):.3g} us")
+    if summary.isolated:
+        warnings.append(f"{summary.isolated} observations were dropped: their frame has no neighbouring frame "
+                        "to interpolate with")
+    if summary.unprojectable:
+        warnings.append(f"{summary.unprojectable} observations could not be projected and were ignored")
+    if not summary.converged:
+        warnings.append(f"the solve did not report convergence: {summary.message}")
+
+    return LinearInterpResult(
+        line_delay_s=d, line_delay_std_s=std, readout_time_s=d * rows, rows=rows, frame_times_s=frame_times,
+        frame_poses=np.asarray(refined), linked_to_next=linked, max_frame_interval_s=summary.max_frame_interval_s,
+        rms_px=summary.rms_px, normalised_cost=cost, pixel_sigma=sigma, pixel_sigma_source=sigma_source,
+        converged=bool(summary.converged), determined=determined, warnings=warnings, frames_total=frames_total,
+        frames_used=used.num_frames, observations=summary.num_error_terms,
+        isolated_observations=summary.isolated, extrapolated_observations=summary.extrapolated,
+        num_chains=summary.num_chains, initial_line_delay_s=initial_d,
+        solve_time_s=time.perf_counter() - started,
+        observation_time_s=np.asarray(summary.observation_time_s), residual_px=np.asarray(summary.residual_px),
+        standardised_sq=np.asarray(summary.standardised_sq), gs_poses=gs, used_observations=used)

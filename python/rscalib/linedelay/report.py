@@ -1,0 +1,283 @@
+"""Outputs of `rscalib linedelay` / `localize`: result.json, trajectory CSV, plots, a
+self-contained report.html with a verdict, and camera files for other tools (SPEC §5)."""
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only; no display needed
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Ellipse  # noqa: E402
+
+from .. import _core  # noqa: E402
+from .._core import CameraModel  # noqa: E402
+from ..io.cameras import write_camera_set  # noqa: E402
+from .spline import LineDelayResult  # noqa: E402
+
+
+@dataclass
+class Verdict:
+    trust: bool
+    reasons: list[str]     # why not (or caveats)
+    headline: str
+
+
+def image_velocity(result: LineDelayResult, camera: CameraModel, times_s: np.ndarray, points_w: np.ndarray,
+                   h_s: float = 1e-4) -> np.ndarray:
+    """(u_dot, v_dot) in px/s of each point at its time, by central differences of the
+    projection through the estimated trajectory."""
+    traj = result.trajectory
+    t = np.clip(times_s, traj.t_begin + h_s, traj.t_end - h_s)
+    uv = []
+    for dt in (-h_s, h_s):
+        rotations, translations = _core.poses_at(traj, t + dt)
+        points_c = np.einsum("nij,nj->ni", rotations, points_w) + translations
+        uv.append(camera.project(points_c))
+    return (uv[1] - uv[0]) / (2 * h_s)
+
+
+def verdict(result: LineDelayResult) -> Verdict:
+    reasons = []
+    if not result.determined:
+        reasons.append("the data do not determine the line delay (too little motion)")
+    if not 0.7 <= result.normalised_cost <= 1.5:
+        reasons.append(f"J/2N = {result.normalised_cost:.2f} is far from 1: the noise model does not fit "
+                       "(outliers, wrong intrinsics, or a wrong pixel sigma)")
+    if result.frames_used < 0.3 * result.frames_total:
+        reasons.append(f"only {result.frames_used} of {result.frames_total} frames were usable")
+    rows_seen = result.used_observations.uv[:, 1]
+    span = (np.percentile(rows_seen, 98) - np.percentile(rows_seen, 2)) / result.rows if len(rows_seen) else 0
+    if span < 0.4:
+        reasons.append(f"the target covered only {span * 100:.0f} % of the image rows; move it over the whole frame")
+    if math.isfinite(result.line_delay_std_s) and result.line_delay_s != 0 and \
+            result.line_delay_std_s > 0.02 * abs(result.line_delay_s):
+        reasons.append(f"the uncertainty is {result.line_delay_std_s / abs(result.line_delay_s) * 100:.1f} % of "
+                       "the estimate; record longer or with faster motion")
+    if not result.converged:
+        reasons.append("the solver did not report convergence")
+    trust = not reasons
+    d_us, s_us = result.line_delay_s * 1e6, result.line_delay_std_s * 1e6
+    headline = (f"Line delay {d_us:.3f} ± {s_us:.3f} µs/row (readout {result.readout_time_s * 1e3:.3f} ms): "
+                + ("trust it." if trust else "do not trust it yet."))
+    return Verdict(trust, reasons, headline)
+
+
+# ------------------------------------------------------------------------------------- plots
+
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_residuals_time(result: LineDelayResult, path: Path) -> Path:
+    fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+    t = result.observation_time_s - result.trajectory.t_begin
+    for ax, k, name in ((axes[0], 0, "u"), (axes[1], 1, "v")):
+        ax.plot(t, result.residual_px[:, k], ".", ms=1.5, alpha=0.4)
+        ax.axhline(0, color="k", lw=0.6)
+        for s in (-3, 3):
+            ax.axhline(s * result.pixel_sigma, color="r", lw=0.6, ls="--")
+        ax.set_ylabel(f"{name} residual (px)")
+    axes[0].set_title(f"Residuals over time (rms {result.rms_px:.3f} px; dashed: ±3σ, σ = {result.pixel_sigma:.3f} px)")
+    axes[1].set_xlabel("time (s)")
+    return _save(fig, path)
+
+
+def plot_residuals_image(result: LineDelayResult, path: Path) -> Path:
+    fig, ax = plt.subplots(figsize=(7, 5.5))
+    uv = result.used_observations.uv
+    mag = np.linalg.norm(result.residual_px, axis=1)
+    sc = ax.scatter(uv[:, 0], uv[:, 1], c=mag, s=2, cmap="viridis", vmax=np.nanpercentile(mag, 99))
+    fig.colorbar(sc, ax=ax, label="|residual| (px)")
+    w, h = result.used_observations.image_size
+    ax.set_xlim(0, w)
+    ax.set_ylim(h, 0)
+    ax.set_aspect("equal")
+    ax.set_title("Residual magnitude over the image (also: target coverage)")
+    ax.set_xlabel("u (px)")
+    ax.set_ylabel("v (px)")
+    return _save(fig, path)
+
+
+def plot_covariance_ellipses(result: LineDelayResult, camera: CameraModel, path: Path, count: int = 6) -> Path:
+    """Paper Fig. 2: error covariance A R A^T (red) against R (grey) at a few observations
+    with fast image motion, drawn at their image position and magnified."""
+    obs = result.used_observations
+    velocity = image_velocity(result, camera, result.observation_time_s, obs.points_w())
+    speed = np.linalg.norm(velocity, axis=1)
+    picks = np.argsort(speed)[::-1][: max(1, len(speed) // 50)]
+    picks = picks[np.linspace(0, len(picks) - 1, min(count, len(picks))).astype(int)]
+    fig, ax = plt.subplots(figsize=(7, 5.5))
+    scale = 40.0 / max(result.pixel_sigma, 1e-9)
+    r = result.pixel_sigma ** 2 * np.eye(2)
+    for i in picks:
+        a = _core.error_noise_map(result.line_delay_s, velocity[i])
+        for cov, color in ((r, "0.6"), (a @ r @ a.T, "r")):
+            values, vectors = np.linalg.eigh(cov)
+            angle = np.degrees(np.arctan2(vectors[1, 1], vectors[0, 1]))
+            ax.add_patch(Ellipse(obs.uv[i], 2 * scale * np.sqrt(values[1]), 2 * scale * np.sqrt(values[0]),
+                                 angle=angle, fill=False, color=color, lw=1.5))
+        ax.annotate(f"{speed[i]:.0f} px/s, det A = {np.linalg.det(a):.3f}", obs.uv[i], fontsize=7,
+                    xytext=(4, 4), textcoords="offset points")
+    w, h = obs.image_size
+    ax.set_xlim(0, w)
+    ax.set_ylim(h, 0)
+    ax.set_aspect("equal")
+    ax.set_title(f"Error covariance A R Aᵀ (red) vs R (grey), 1σ magnified ×{scale:.0f}")
+    return _save(fig, path)
+
+
+def plot_knots_and_speed(result: LineDelayResult, camera: CameraModel, path: Path) -> Path:
+    obs = result.used_observations
+    velocity = image_velocity(result, camera, result.observation_time_s, obs.points_w())
+    speed = np.linalg.norm(velocity, axis=1)
+    t0 = result.trajectory.t_begin
+    knots = result.knots - t0
+    fig, ax = plt.subplots(figsize=(9, 3.8))
+    widths = np.diff(knots)
+    ax.bar(knots[:-1], 1.0 / widths, width=widths, align="edge", alpha=0.45, label="knot density (1/s)")
+    ax.set_ylabel("knots per second")
+    ax.set_xlabel("time (s)")
+    ax2 = ax.twinx()
+    frame_t = obs.frame_times_s[obs.frame_index] - t0
+    frames = np.unique(frame_t)
+    mean_speed = np.array([np.median(speed[frame_t == f]) for f in frames])
+    ax2.plot(frames, mean_speed, color="C1", lw=1, label="image speed")
+    ax2.set_ylabel("median image speed (px/s)", color="C1")
+    ax.set_title("Knot density after adaptation, and image motion")
+    return _save(fig, path)
+
+
+def plot_rounds(result: LineDelayResult, path: Path) -> Path:
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    rounds = [h.round for h in result.history]
+    d = [h.line_delay_s * 1e6 for h in result.history]
+    ax.plot(rounds, d, "o-")
+    last = result.history[-1]
+    if math.isfinite(last.line_delay_std_s):
+        ax.errorbar([last.round], [last.line_delay_s * 1e6], yerr=[3 * last.line_delay_std_s * 1e6], color="r",
+                    capsize=4, label="final ±3σ")
+        ax.legend()
+    for h in result.history:
+        ax.annotate(f"{h.segments} seg.", (h.round, h.line_delay_s * 1e6), fontsize=7, xytext=(3, -10),
+                    textcoords="offset points")
+    ax.set_xlabel("knot-adaptation round")
+    ax.set_ylabel("line delay (µs/row)")
+    ax.set_title("Line delay per round")
+    return _save(fig, path)
+
+
+def plot_trajectory(result: LineDelayResult, path: Path) -> Path:
+    traj = result.trajectory
+    t = np.linspace(traj.t_begin, traj.t_end, 2000)
+    x = traj.evaluate(t)
+    poses = result.frame_poses
+    frame_t = result.used_observations.frame_times_s
+    rot = _core.unwrap_rotation_vectors(poses.rotation_vector)
+    fig, axes = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    for k, name in enumerate("xyz"):
+        axes[0].plot(t - traj.t_begin, x[:, k], lw=1, label=f"p_{name}")
+        axes[0].plot(frame_t - traj.t_begin, poses.translation[:, k], ".", ms=2, color=f"C{k}")
+        axes[1].plot(t - traj.t_begin, x[:, 3 + k], lw=1, label=f"φ_{name}")
+        axes[1].plot(frame_t - traj.t_begin, rot[:, k], ".", ms=2, color=f"C{k}")
+    axes[0].set_ylabel("translation p (m)")
+    axes[1].set_ylabel("rotation vector φ (rad)")
+    axes[1].set_xlabel("time (s)")
+    axes[0].legend(ncol=3, fontsize=8)
+    axes[1].legend(ncol=3, fontsize=8)
+    axes[0].set_title("Trajectory T_cw(t): spline (lines) and per-frame GS PnP (dots)")
+    return _save(fig, path)
+
+
+# ---------------------------------------------------------------------------------- writers
+
+def write_trajectory_csv(result: LineDelayResult, path: Path) -> Path:
+    """T_cw at every used frame's row-0 time and mid-readout time: t_s, p (3), φ (3)."""
+    times = np.sort(np.concatenate([result.used_observations.frame_times_s,
+                                    result.used_observations.frame_times_s + 0.5 * result.readout_time_s]))
+    times = times[(times >= result.trajectory.t_begin) & (times <= result.trajectory.t_end)]
+    x = result.trajectory.evaluate(times)
+    header = "t_s,p_x_m,p_y_m,p_z_m,phi_x_rad,phi_y_rad,phi_z_rad"
+    np.savetxt(path, np.c_[times, x], delimiter=",", header=header, comments="", fmt="%.9f")
+    return path
+
+
+def write_outputs(result: LineDelayResult, camera: CameraModel, out_dir, *, frames_total: Optional[int] = None,
+                  extra: Optional[dict] = None, fps: float = 0.0, title: str = "rscalib linedelay") -> dict:
+    """Writes everything into out_dir; returns the result.json dict."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = result.summary_dict()
+    if frames_total is not None:
+        summary["frames_total"] = int(frames_total)
+    summary.update(extra or {})
+    v = verdict(result)
+    summary["verdict"] = {"trust": v.trust, "headline": v.headline, "reasons": v.reasons}
+    warnings = list(summary["warnings"])
+
+    files = {"trajectory_csv": write_trajectory_csv(result, out / "trajectory.csv").name}
+    camera_files, camera_warnings = write_camera_set(camera, out, result.line_delay_s, fps=fps, rms_px=result.rms_px)
+    files |= camera_files
+    warnings += camera_warnings
+    plots = {
+        "residuals over time": plot_residuals_time(result, out / "residuals_time.png"),
+        "residuals over the image and target coverage": plot_residuals_image(result, out / "residuals_image.png"),
+        "error covariance ellipses (paper Fig. 2)": plot_covariance_ellipses(result, camera, out / "covariance_ellipses.png"),
+        "knot density and image motion": plot_knots_and_speed(result, camera, out / "knots_speed.png"),
+        "line delay per knot-adaptation round": plot_rounds(result, out / "rounds.png"),
+        "trajectory": plot_trajectory(result, out / "trajectory.png"),
+    }
+    files["plots"] = [p.name for p in plots.values()]
+    files["report"] = "report.html"
+    summary["warnings"] = warnings
+    summary["files"] = files
+    (out / "result.json").write_text(json.dumps(summary, indent=2))
+    _write_html(out / "report.html", title, summary, v, plots)
+    return summary
+
+
+def _img(path: Path) -> str:
+    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.stem)}">'
+
+
+def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict) -> None:
+    rows = [("line delay", f"{summary['line_delay_s'] * 1e6:.4f} µs/row"),
+            ("standard deviation", "—" if summary["line_delay_std_s"] is None else f"{summary['line_delay_std_s'] * 1e6:.4f} µs/row"),
+            ("readout time", f"{summary['readout_time_s'] * 1e3:.4f} ms ({summary['rows']} rows)"),
+            ("frames used / total", f"{summary['frames_used']} / {summary['frames_total']}"),
+            ("observations", summary["observations"]),
+            ("knot segments", summary["segments"]),
+            ("rms residual", f"{summary['rms_px']:.4f} px"),
+            ("pixel sigma", f"{summary['pixel_sigma']:.4f} px ({summary['pixel_sigma_source']})"),
+            ("normalised cost J/2N", f"{summary['normalised_cost']:.4f}"),
+            ("converged", summary["converged"]),
+            ("solve time", f"{summary['solve_time_s']:.2f} s")]
+    table = "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(val))}</td></tr>" for k, val in rows)
+    reasons = "".join(f"<li>{html.escape(r)}</li>" for r in v.reasons)
+    warnings = "".join(f"<li>{html.escape(w)}</li>" for w in summary["warnings"])
+    figures = "".join(f"<figure>{_img(p)}<figcaption>{html.escape(name)}</figcaption></figure>" for name, p in plots.items())
+    color = "#1a7f37" if v.trust else "#b35900"
+    path.write_text(f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
+<style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}}
+table{{border-collapse:collapse}}th,td{{padding:3px 10px;border-bottom:1px solid #ddd;text-align:left}}
+.verdict{{border-left:6px solid {color};padding:0.5em 1em;background:#f6f6f6}}
+figure{{margin:1.5em 0}}img{{max-width:100%}}figcaption{{color:#555;font-size:90%}}</style></head><body>
+<h1>{html.escape(title)}</h1>
+<div class="verdict"><strong>{html.escape(v.headline)}</strong>{'<ul>' + reasons + '</ul>' if reasons else ''}</div>
+<h2>Result</h2><table>{table}</table>
+{'<h2>Warnings</h2><ul>' + warnings + '</ul>' if warnings else ''}
+<h2>Plots</h2>{figures}
+<p>Files: result.json, trajectory.csv, camera_with_line_delay.yaml (OpenCV), camchain.yaml (Kalibr),
+gyroflow_lens_profile.json. Conventions: row 0 of a frame is exposed at its timestamp, row v at t + v·d.</p>
+</body></html>""")

@@ -1,0 +1,322 @@
+"""Rolling-shutter line-delay calibration (SPEC §2; Oth et al. 2013 §3-4).
+
+Pipeline: per-frame GS PnP -> rotation-vector unwrapping (eq. 22) -> smoothing spline with
+deliberately few uniform knots -> joint Ceres solve of trajectory and line delay -> adaptive
+knots (split every segment with J_j >= 2 N_j, §4.2) -> repeat until nothing splits.
+The maths and the choices made where the paper is silent: docs/formulation.md.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+import numpy as np
+
+from .. import _core
+from .._core import BSpline, CameraModel
+from ..errors import InputError
+from ..observations import Observations
+from .common import UNDETERMINED_STD_FRACTION, check_inputs, choose_pixel_sigma, frame_rate_hz, seed_poses
+from .pnp import FramePoses
+
+# diag(Q) of the acceleration prior, [m^2/s^3 x3, rad^2/s^3 x3]: a hand-held camera's
+# acceleration spectral density (~2 m/s^2, ~20 rad/s^2 over ~0.3 s). The paper's values are
+# kept as PAPER_MOTION_PRIOR_Q; with errors standardised in pixels they bias d (docs/formulation.md).
+DEFAULT_MOTION_PRIOR_Q = (1.0, 1.0, 1.0, 1e2, 1e2, 1e2)
+PAPER_MOTION_PRIOR_Q = (1e-5, 1e-5, 1e-5, 1e-2, 1e-2, 1e-2)
+# Rounds before the last are re-solved after knot insertion anyway: solve them loosely.
+_ROUND_MAX_ITERATIONS = 30
+_ROUND_FUNCTION_TOLERANCE = 1e-6
+
+
+@dataclass
+class RoundRecord:
+    """One solve of the knot-adaptation loop."""
+
+    round: int
+    segments: int
+    line_delay_s: float
+    line_delay_std_s: float
+    normalised_cost: float
+    rms_px: float
+    segments_split: int
+    segments_at_cap: int              # over their expected cost but too short to halve (min_segment_s)
+    iterations: int
+    solve_time_s: float
+
+
+@dataclass
+class LineDelayResult:
+    """Result of calibrate_line_delay / localize. Times in s, pixels in px."""
+
+    line_delay_s: float
+    line_delay_std_s: float
+    readout_time_s: float
+    rows: int
+    trajectory: BSpline
+    knots: np.ndarray                 # breakpoints of the final spline
+    rms_px: float
+    normalised_cost: float            # J / 2N (1 when the noise model is right)
+    pixel_sigma: float
+    pixel_sigma_source: str           # "user" | "grid third differences" | "residuals"
+    converged: bool
+    determined: bool                  # False: the data do not determine the line delay
+    warnings: list[str]
+    history: list[RoundRecord]
+    frames_total: int
+    frames_used: int
+    observations: int
+    initial_line_delay_s: float
+    solve_time_s: float
+    segment_cost: np.ndarray          # J_j of the final segments
+    segment_count: np.ndarray         # N_j
+    observation_time_s: np.ndarray    # (M,) t_i + v d
+    residual_px: np.ndarray           # (M, 2) y - pi(...)
+    standardised_sq: np.ndarray       # (M,) squared standardised error
+    frame_poses: FramePoses           # the GS PnP initial guess / baseline
+    used_observations: Observations = field(repr=False)
+
+    @property
+    def num_segments(self) -> int:
+        return len(self.knots) - 1
+
+    def summary_dict(self) -> dict:
+        """JSON-ready fields of SPEC §5."""
+        return {
+            "line_delay_s": self.line_delay_s,
+            "line_delay_std_s": self.line_delay_std_s if math.isfinite(self.line_delay_std_s) else None,
+            "readout_time_s": self.readout_time_s,
+            "rows": self.rows,
+            "frames_total": self.frames_total,
+            "frames_used": self.frames_used,
+            "observations": self.observations,
+            "knots": int(len(self.knots)),
+            "segments": self.num_segments,
+            "rms_px": self.rms_px,
+            "normalised_cost": self.normalised_cost,
+            "pixel_sigma": self.pixel_sigma,
+            "pixel_sigma_source": self.pixel_sigma_source,
+            "converged": self.converged,
+            "determined": self.determined,
+            "warnings": list(self.warnings),
+            "initial_line_delay_s": self.initial_line_delay_s,
+            "solve_time_s": self.solve_time_s,
+            "history": [vars(r) | {"line_delay_std_s": r.line_delay_std_s if math.isfinite(r.line_delay_std_s) else None}
+                        for r in self.history],
+        }
+
+
+def _solver_options(pixel_sigma: float, *, estimate_line_delay: bool, standardise_errors: bool,
+                    use_motion_prior: bool, motion_prior_q, robust_loss: str, num_threads: int,
+                    compute_covariance: bool) -> _core.RsSolverOptions:
+    options = _core.RsSolverOptions()
+    options.pixel_sigma = float(pixel_sigma)
+    options.estimate_line_delay = estimate_line_delay
+    options.standardise_errors = standardise_errors
+    options.use_motion_prior = use_motion_prior
+    options.motion_prior_q = np.asarray(motion_prior_q, dtype=np.float64)
+    options.robust_loss = robust_loss
+    options.num_threads = int(num_threads)
+    options.compute_covariance = compute_covariance
+    return options
+
+
+def initial_trajectory(observations: Observations, poses: FramePoses, line_delay_s: float,
+                       segments: int, t_begin: float, t_end: float,
+                       acceleration_weight: float = 1e-6) -> BSpline:
+    """Smoothing spline [p; phi] through the per-frame PnP poses (unwrapped rotation vectors),
+    each placed at its frame's mean observation time t_i + mean(v) d."""
+    frames = np.flatnonzero(poses.ok)
+    if len(frames) < 4:
+        raise InputError(f"only {len(frames)} frames have a pose from PnP; at least 4 are needed")
+    mean_row = np.zeros(observations.num_frames)
+    counts = np.bincount(observations.frame_index, minlength=observations.num_frames)
+    sums = np.bincount(observations.frame_index, weights=observations.uv[:, 1], minlength=observations.num_frames)
+    mean_row[counts > 0] = sums[counts > 0] / counts[counts > 0]
+    times = observations.frame_times_s[frames] + mean_row[frames] * line_delay_s
+    rotation = _core.unwrap_rotation_vectors(poses.rotation_vector[frames])
+    samples = np.c_[poses.translation[frames], rotation]
+    times = np.clip(times, t_begin, t_end)
+    knots = BSpline.clamped_knots(np.linspace(t_begin, t_end, segments + 1))
+    return _core.fit_bspline(knots, times, samples, acceleration_weight=[acceleration_weight])
+
+
+def _split_segments(trajectory: BSpline, segment_cost, segment_count, min_segment_s: float,
+                    margin_sigmas: float) -> tuple[list[float], int]:
+    """Midpoints of the segments with J_j >= 2 N_j + margin * sqrt(4 N_j) (paper §4.3 step 5
+    with margin 0) that are long enough to halve, and the number of segments over that
+    threshold but already at the density cap."""
+    breaks = trajectory.breakpoints
+    new_knots, at_cap = [], 0
+    for j, (cost, count) in enumerate(zip(segment_cost, segment_count)):
+        if count > 0 and cost >= 2.0 * count + margin_sigmas * math.sqrt(4.0 * count):
+            if breaks[j + 1] - breaks[j] >= 2.0 * min_segment_s:
+                new_knots.append(0.5 * (breaks[j] + breaks[j + 1]))
+            else:
+                at_cap += 1
+    return new_knots, at_cap
+
+
+def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: Optional[int] = None, *,
+                         pixel_sigma: Optional[float] = None,
+                         line_delay0_s: Optional[float] = None,
+                         initial_segments_per_s: Optional[float] = None,
+                         num_segments: Optional[int] = None,
+                         adaptive_knots: bool = True,
+                         max_rounds: int = 8,
+                         min_segment_s: Optional[float] = None,
+                         split_margin_sigmas: float = 2.0,
+                         standardise_errors: bool = True,
+                         use_motion_prior: bool = True,
+                         motion_prior_q=DEFAULT_MOTION_PRIOR_Q,
+                         robust_loss: str = "none",
+                         num_threads: int = 2,
+                         progress: Optional[Callable[[RoundRecord], None]] = None) -> LineDelayResult:
+    """Estimate the line delay d (s/row) and the continuous-time trajectory (SPEC §2).
+
+    observations: detected target points with frame timestamps; camera: known intrinsics;
+    rows: image rows read out (default: image height). pixel_sigma: detection noise in px
+    (default: estimated from the data, see rscalib.linedelay.noise). num_segments fixes uniform knots
+    (with adaptive_knots=False, for experiments). min_segment_s: shortest segment the
+    adaptation may create (default: half a frame interval, at most 1/60 s); initial_segments_per_s: uniform
+    knots to start from (default fps/4 but at least 7.5, deliberately too few). split_margin_sigmas:
+    a segment splits when J_j >= 2 N_j + margin * sqrt(4 N_j); 0 is the paper's rule, which
+    also splits ~1/3 of well-modelled segments by chance (docs/formulation.md §7).
+    progress: called after each round.
+    """
+    return _run(observations, camera, rows, estimate=True, pixel_sigma=pixel_sigma,
+                line_delay_s=line_delay0_s, initial_segments_per_s=initial_segments_per_s,
+                num_segments=num_segments, adaptive_knots=adaptive_knots, max_rounds=max_rounds,
+                min_segment_s=min_segment_s, split_margin_sigmas=split_margin_sigmas,
+                standardise_errors=standardise_errors,
+                use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
+                robust_loss=robust_loss, num_threads=num_threads, progress=progress)
+
+
+def localize(observations: Observations, camera: CameraModel, rows: Optional[int] = None,
+             line_delay_s: float = 0.0, **kwargs) -> LineDelayResult:
+    """Continuous-time trajectory with a known line delay (paper §5.1); same options as
+    calibrate_line_delay. The result's frame_poses hold the per-frame GS PnP baseline."""
+    if not np.isfinite(line_delay_s):
+        raise InputError("line_delay_s must be a finite number")
+    return _run(observations, camera, rows, estimate=False, line_delay_s=float(line_delay_s), **kwargs)
+
+
+def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s=None,
+         initial_segments_per_s=None, num_segments=None, adaptive_knots=True, max_rounds=8,
+         min_segment_s=None, split_margin_sigmas=2.0, standardise_errors=True, use_motion_prior=True,
+         motion_prior_q=DEFAULT_MOTION_PRIOR_Q, robust_loss="none", num_threads=2,
+         progress=None) -> LineDelayResult:
+    started = time.perf_counter()
+    rows = check_inputs(observations, camera, rows)
+    warnings: list[str] = []
+    fps = frame_rate_hz(observations)
+    nominal_delay_s = 1.0 / (fps * rows)
+    d = float(nominal_delay_s if line_delay_s is None else line_delay_s)
+    initial_d = d
+    if min_segment_s is None:
+        # Halving stops below 2 * min_segment_s, so segments can reach ~1 frame at 30 fps. A 2-frame
+        # floor could not follow hand shake (0.5-8 Hz): J/2N ~ 75, d several % off. The floor is about
+        # the motion's bandwidth, not the frame rate: at most 1/60 s, also for slow (e.g. 7 fps) cameras.
+        min_segment_s = min(0.5 / fps, 1.0 / 60.0)
+
+    frames_total = observations.num_frames
+    used, used_poses = seed_poses(observations, camera, warnings, min_frames=4)
+    sigma, sigma_source = choose_pixel_sigma(used, pixel_sigma)
+
+    t_begin = float(used.frame_times_s[0])
+    t_end = float(used.frame_times_s[-1] + 1.0 / fps)  # the last frame's readout
+    duration = t_end - t_begin
+    if initial_segments_per_s is None:
+        # One segment per 4 frames (at least 7.5 per second): too few for hand-held motion on purpose.
+        initial_segments_per_s = max(fps / 4.0, 7.5)
+    segments = int(num_segments) if num_segments else max(1, int(math.ceil(duration * initial_segments_per_s)))
+    trajectory = initial_trajectory(used, used_poses, d, segments, t_begin, t_end)
+
+    options = _solver_options(sigma, estimate_line_delay=estimate, standardise_errors=standardise_errors,
+                              use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
+                              robust_loss=robust_loss, num_threads=num_threads, compute_covariance=False)
+    args = (used.frame_times_s[used.frame_index], used.uv, used.points_w(), camera)
+    history: list[RoundRecord] = []
+    adapted = not adaptive_knots
+    summary = None
+    options.max_iterations = _ROUND_MAX_ITERATIONS
+    options.function_tolerance = _ROUND_FUNCTION_TOLERANCE
+    for round_index in range(max(1, max_rounds)):
+        last_chance = round_index == max_rounds - 1
+        summary = _core.solve_line_delay(*args, trajectory, d, options)
+        d = summary.line_delay_s
+        cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
+        new_knots, at_cap = _split_segments(trajectory, summary.segment_cost, summary.segment_count,
+                                            min_segment_s, split_margin_sigmas) if adaptive_knots else ([], 0)
+        record = RoundRecord(round_index, trajectory.num_segments, d, float("nan"), cost, summary.rms_px,
+                             0 if last_chance else len(new_knots), at_cap, summary.iterations,
+                             summary.solve_time_s)
+        history.append(record)
+        if progress:
+            progress(record)
+        if not new_knots:
+            adapted = True
+            break
+        if last_chance:
+            break
+        for t in new_knots:
+            trajectory.insert_knot(t)
+    if adaptive_knots and not adapted:
+        warnings.append(f"knot adaptation stopped at the round cap ({max_rounds}) with segments still "
+                        "above their expected cost")
+
+    # Final polish at tight tolerance on the final knots, with the covariance of d.
+    options.max_iterations = 100
+    options.function_tolerance = 1e-9
+    options.compute_covariance = estimate
+    summary = _core.solve_line_delay(*args, trajectory, d, options)
+    d = summary.line_delay_s
+    std = summary.line_delay_std_s if estimate else 0.0
+    history[-1].line_delay_s = d
+    history[-1].line_delay_std_s = std
+    history[-1].iterations += summary.iterations
+    history[-1].solve_time_s += summary.solve_time_s
+
+    cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
+    if sigma_source == "residuals":
+        # No grid structure to estimate the noise from: take it from the residuals.
+        sigma = summary.rms_px
+        warnings.append("pixel sigma could not be estimated from the target grid; using the residual RMS "
+                        f"({sigma:.3f} px), so J/2N carries no information")
+    determined = True
+    if estimate:
+        if not (summary.covariance_ok and math.isfinite(std) and std < UNDETERMINED_STD_FRACTION * nominal_delay_s):
+            determined = False
+            warnings.append("the line delay is not determined by this data (too little or the wrong kind of "
+                            f"motion): sigma_d = {std * 1e6 if math.isfinite(std) else float('inf'):.3g} us; "
+                            "move the camera faster, mostly rotating about its x and y axes")
+    if cost > 1.5 and adaptive_knots and history[-1].segments_at_cap > 0:
+        warnings.append(f"{history[-1].segments_at_cap} trajectory segments are at the shortest allowed length "
+                        f"({min_segment_s * 1e3:.1f} ms) and still fit badly: the motion is faster than the spline can "
+                        "follow, so sigma_d is optimistic (lower min_segment_s, or move more smoothly)")
+    if cost > 1.5:
+        hint = ("outliers are down-weighted by the robust loss" if robust_loss != "none"
+                else "or there are outliers (try robust_loss='huber')")
+        warnings.append(f"normalised cost J/2N = {cost:.2f} > 1.5: the detection noise is larger than "
+                        f"sigma = {sigma:.3f} px, {hint}")
+    if summary.clamped_weights:
+        warnings.append(f"{summary.clamped_weights} observations move down the image nearly as fast as the "
+                        "shutter; their error weights were clamped")
+    if summary.unprojectable:
+        warnings.append(f"{summary.unprojectable} observations could not be projected and were ignored")
+    if not summary.converged:
+        warnings.append(f"the final solve did not report convergence: {summary.message}")
+
+    return LineDelayResult(
+        line_delay_s=d, line_delay_std_s=std, readout_time_s=d * rows, rows=rows,
+        trajectory=trajectory, knots=np.asarray(trajectory.breakpoints), rms_px=summary.rms_px,
+        normalised_cost=cost, pixel_sigma=sigma, pixel_sigma_source=sigma_source,
+        converged=bool(summary.converged), determined=determined, warnings=warnings, history=history,
+        frames_total=frames_total, frames_used=used.num_frames, observations=summary.num_error_terms,
+        initial_line_delay_s=initial_d, solve_time_s=time.perf_counter() - started,
+        segment_cost=np.asarray(summary.segment_cost), segment_count=np.asarray(summary.segment_count),
+        observation_time_s=np.asarray(summary.observation_time_s), residual_px=np.asarray(summary.residual_px),
+        standardised_sq=np.asarray(summary.standardised_sq), frame_poses=used_poses, used_observations=used)

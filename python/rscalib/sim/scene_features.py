@@ -1,0 +1,357 @@
+"""Feature-level simulation for the SOG self-calibration filter (no images).
+
+A civera-radial camera (default: the paper's 320x240 camera) moves hand-held (smooth, global shutter)
+inside a room whose walls, floor and ceiling carry random 3-D points. Every frame gives the noisy
+distorted pixels of the visible points with their true ids, plus the true trajectory. A small driver,
+:func:`track_sequence`, plays the role of the image front end (it knows the true correspondences) so
+the filter can be tested and benchmarked in isolation. docs/sog.md §11.
+
+Conventions (docs/conventions.md): OpenCV pixels; camera x right, y down, z forward;
+``x_c = R_cw x_w + p_cw``. The filter's world is the first camera frame; :meth:`SogSequence.truth_in_first_camera`
+expresses the truth there. The projection here is a NumPy reference implementation of SPEC §4
+(Newton on the radial polynomial), independent of the C++ core.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional, Sequence
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..selfcalib.prior import PAPER_CAMERA_PARAMS, PAPER_IMAGE_SIZE, PAPER_PIXEL_SIZE_MM
+
+__all__ = [
+    "CiveraCamera",
+    "PAPER_CAMERA",
+    "HandheldRoomMotion",
+    "SogSequence",
+    "SogRunHistory",
+    "room_points",
+    "simulate_sequence",
+    "track_sequence",
+]
+
+
+# --------------------------------------------------------------------------------------------------
+# Camera
+
+
+@dataclass(frozen=True)
+class CiveraCamera:
+    """civera-radial camera: ``[f, cx, cy, k1 (mm^-2), k2 (mm^-4)]``, image size, pixel size (mm)."""
+
+    f: float = PAPER_CAMERA_PARAMS[0]
+    cx: float = PAPER_CAMERA_PARAMS[1]
+    cy: float = PAPER_CAMERA_PARAMS[2]
+    k1: float = PAPER_CAMERA_PARAMS[3]
+    k2: float = PAPER_CAMERA_PARAMS[4]
+    width: int = PAPER_IMAGE_SIZE[0]
+    height: int = PAPER_IMAGE_SIZE[1]
+    pixel_size_mm: float = PAPER_PIXEL_SIZE_MM
+
+    @property
+    def params(self) -> np.ndarray:
+        return np.array([self.f, self.cx, self.cy, self.k1, self.k2], dtype=np.float64)
+
+    def undistort(self, uv_d: np.ndarray) -> np.ndarray:
+        """Distorted -> undistorted pixels (closed form)."""
+        d = np.asarray(uv_d, dtype=np.float64).reshape(-1, 2) - [self.cx, self.cy]
+        rd2 = np.sum((self.pixel_size_mm * d) ** 2, axis=1, keepdims=True)
+        return [self.cx, self.cy] + d * (1.0 + self.k1 * rd2 + self.k2 * rd2 ** 2)
+
+    def project(self, points_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Camera-frame points (n, 3) -> distorted pixels (n, 2) and a validity mask (n,).
+
+        Invalid: behind the camera, or the radial polynomial not invertible there.
+        """
+        x = np.asarray(points_c, dtype=np.float64).reshape(-1, 3)
+        front = x[:, 2] > 1e-9
+        z = np.where(front, x[:, 2], 1.0)
+        off_u = self.f * x[:, :2] / z[:, None]
+        ru = self.pixel_size_mm * np.linalg.norm(off_u, axis=1)
+        # Newton on g(r) = r (1 + k1 r^2 + k2 r^4) - ru from r = ru (from above for k1, k2 >= 0).
+        rd = ru.copy()
+        for _ in range(60):
+            r2 = rd * rd
+            g = rd * (1.0 + r2 * (self.k1 + self.k2 * r2)) - ru
+            dg = 1.0 + r2 * (3.0 * self.k1 + 5.0 * self.k2 * r2)
+            rd = rd - g / np.where(dg > 0, dg, 1.0)
+        r2 = rd * rd
+        g = rd * (1.0 + r2 * (self.k1 + self.k2 * r2)) - ru
+        dg = 1.0 + r2 * (3.0 * self.k1 + 5.0 * self.k2 * r2)
+        ok = front & (np.abs(g) <= 1e-12 * np.maximum(1.0, ru)) & (dg > 0) & (rd >= 0)
+        scale = np.where(ru > 1e-300, rd / np.where(ru > 1e-300, ru, 1.0), 1.0)
+        uv = np.array([self.cx, self.cy]) + off_u * scale[:, None]
+        return uv, ok
+
+
+PAPER_CAMERA = CiveraCamera()
+
+
+# --------------------------------------------------------------------------------------------------
+# Scene and motion
+
+
+def room_points(size_m: Sequence[float] = (6.0, 2.7, 6.0), center_m: Sequence[float] = (0.0, -0.1, 0.5),
+                density_per_m2: float = 40.0, seed: int = 0) -> np.ndarray:
+    """Random points on the six faces of a box room (world frame, y down), uniform per area.
+
+    size_m: extent along x, y, z; center_m: the room's centre. Returns (P, 3) float64.
+    """
+    rng = np.random.default_rng([0x50C, int(seed)])
+    size = np.asarray(size_m, dtype=np.float64)
+    center = np.asarray(center_m, dtype=np.float64)
+    pts = []
+    for axis in range(3):
+        a, b = [i for i in range(3) if i != axis]
+        count = int(round(density_per_m2 * size[a] * size[b]))
+        for side in (-0.5, 0.5):
+            p = np.empty((count, 3))
+            p[:, axis] = side * size[axis]
+            p[:, a] = rng.uniform(-0.5, 0.5, count) * size[a]
+            p[:, b] = rng.uniform(-0.5, 0.5, count) * size[b]
+            pts.append(p + center)
+    return np.concatenate(pts)
+
+
+class HandheldRoomMotion:
+    """Smooth hand-held motion inside a room: the camera centre wanders around ``center_m`` and the
+    camera looks roughly along world +z, swinging in yaw, pitch and roll.
+
+    Each of the six channels (position x, y, z; yaw, pitch, roll) is a sum of ``components``
+    sinusoids with seeded log-uniform frequencies in ``freq_range_hz``, random phases and weights
+    ~ f^-1/2 summing to the channel's peak (``position_amplitude_m``, ``rotation_amplitude_deg``),
+    so the peaks are hard bounds. Analytic (C-infinity) and deterministic given ``seed``.
+    Poses: ``R_wc(t)`` (camera to world) and centre ``r(t)``.
+    """
+
+    def __init__(self, seed: int = 0, center_m: Sequence[float] = (0.0, 0.0, 0.0),
+                 position_amplitude_m: Sequence[float] = (0.35, 0.15, 0.3),
+                 rotation_amplitude_deg: Sequence[float] = (30.0, 12.0, 10.0),
+                 freq_range_hz: tuple[float, float] = (0.1, 1.2), components: int = 3,
+                 speed: float = 1.0) -> None:
+        rng = np.random.default_rng([0xCA11, int(seed)])
+        self.center_m = np.asarray(center_m, dtype=np.float64).reshape(3)
+        lo, hi = np.log(freq_range_hz[0]), np.log(freq_range_hz[1])
+        self.freqs_hz = np.exp(rng.uniform(lo, hi, size=(6, components))) * float(speed)
+        self.phases_rad = rng.uniform(0.0, 2.0 * np.pi, size=(6, components))
+        weights = self.freqs_hz ** -0.5 * rng.uniform(0.5, 1.0, size=(6, components))
+        weights /= weights.sum(axis=1, keepdims=True)
+        peaks = np.concatenate([np.asarray(position_amplitude_m, dtype=np.float64),
+                                np.deg2rad(np.asarray(rotation_amplitude_deg, dtype=np.float64))])
+        self.coeffs = weights * peaks[:, None]
+
+    def _channels(self, t_s: np.ndarray) -> np.ndarray:
+        arg = 2.0 * np.pi * self.freqs_hz[None] * t_s[:, None, None] + self.phases_rad[None]
+        return np.einsum("nck,ck->nc", np.sin(arg), self.coeffs)
+
+    def pose_wc(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Camera-to-world rotations (n, 3, 3) and camera centres (n, 3) at times t."""
+        t_s = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).reshape(-1)
+        ch = self._channels(t_s)
+        # Yaw about world y (down), then pitch about camera x, then roll about camera z.
+        rot = Rotation.from_euler("YXZ", ch[:, 3:6])
+        return rot.as_matrix(), self.center_m + ch[:, :3]
+
+    def velocities(self, t_s: np.ndarray, h_s: float = 1e-5) -> tuple[np.ndarray, np.ndarray]:
+        """Linear velocity in the world (n, 3) and angular velocity in the camera frame (n, 3),
+        by central differences (error ~h^2); ``dR_wc/dt = R_wc [w]x``."""
+        t_s = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).reshape(-1)
+        n = len(t_s)
+        R, r = self.pose_wc(np.concatenate([t_s + h_s, t_s - h_s]))
+        v = (r[:n] - r[n:]) / (2 * h_s)
+        R0, _ = self.pose_wc(t_s)
+        W = np.einsum("nji,njk->nik", R0, (R[:n] - R[n:]) / (2 * h_s))
+        return v, np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=1)
+
+
+# --------------------------------------------------------------------------------------------------
+# Sequence
+
+
+@dataclass
+class SogSequence:
+    """Per-frame measurements and the truth that produced them.
+
+    ids[k] (m_k,) ids of the points visible in frame k (rows of ``points_w``); uv[k] (m_k, 2) their
+    noisy distorted pixels; uv_true[k] the noise-free ones. Truth per frame: ``R_wc`` (F, 3, 3),
+    ``r_w`` (F, 3) camera centre, ``v_w`` (F, 3), ``omega_c`` (F, 3) angular velocity in the camera.
+    """
+
+    camera: CiveraCamera
+    times_s: np.ndarray
+    points_w: np.ndarray
+    ids: list
+    uv: list
+    uv_true: list
+    R_wc: np.ndarray
+    r_w: np.ndarray
+    v_w: np.ndarray
+    omega_c: np.ndarray
+    noise_px: float
+
+    def __len__(self) -> int:
+        return len(self.times_s)
+
+    @property
+    def R_cw(self) -> np.ndarray:
+        return np.transpose(self.R_wc, (0, 2, 1))
+
+    @property
+    def p_cw(self) -> np.ndarray:
+        """Translation of ``x_c = R_cw x_w + p_cw`` (docs/conventions.md)."""
+        return -np.einsum("nij,nj->ni", self.R_cw, self.r_w)
+
+    def truth_in_first_camera(self) -> dict:
+        """Truth in the filter's world (the first camera frame): ``r`` (F, 3), ``q_wc`` (F, 4, w
+        first), ``R_wc`` (F, 3, 3), ``v`` (F, 3), ``omega_c`` (F, 3), ``points`` (P, 3), and the
+        13-D motion states ``motion`` (F, 13) = [r, q, v, w] as the filter stores them."""
+        R0 = self.R_wc[0]
+        r = np.einsum("ji,nj->ni", R0, self.r_w - self.r_w[0])
+        R = np.einsum("ji,njk->nik", R0, self.R_wc)
+        v = np.einsum("ji,nj->ni", R0, self.v_w)
+        xyzw = Rotation.from_matrix(R).as_quat()
+        q = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
+        q *= np.where(q[:, :1] < 0, -1.0, 1.0)
+        points = (self.points_w - self.r_w[0]) @ R0
+        motion = np.concatenate([r, q, v, self.omega_c], axis=1)
+        return {"r": r, "q_wc": q, "R_wc": R, "v": v, "omega_c": self.omega_c.copy(),
+                "points": points, "motion": motion}
+
+
+def simulate_sequence(camera: CiveraCamera = PAPER_CAMERA, duration_s: float = 8.0, fps: float = 30.0,
+                      noise_px: float = 0.5, seed: int = 0, points_w: Optional[np.ndarray] = None,
+                      motion: Optional[Any] = None, border_px: float = 4.0,
+                      min_depth_m: float = 0.2) -> SogSequence:
+    """Simulate ``floor(duration_s * fps)`` frames at ``t_k = k / fps``.
+
+    points_w: scene (P, 3); default :func:`room_points` (seeded). motion: anything with
+    ``pose_wc(t)`` and ``velocities(t)``; default :class:`HandheldRoomMotion` (seeded).
+    A point is visible when in front (depth > min_depth_m) and its true and noisy pixels lie at
+    least ``border_px`` inside the image. Noise: independent N(0, noise_px^2) on u and v.
+    """
+    if not fps > 0 or not duration_s > 0:
+        raise ValueError("simulate_sequence: fps and duration_s must be > 0")
+    if points_w is None:
+        points_w = room_points(seed=seed)
+    points_w = np.asarray(points_w, dtype=np.float64).reshape(-1, 3)
+    if motion is None:
+        motion = HandheldRoomMotion(seed=seed)
+    n = int(np.floor(duration_s * fps + 1e-9))
+    t = np.arange(n) / fps
+    R_wc, r_w = motion.pose_wc(t)
+    v_w, omega_c = motion.velocities(t)
+    rng = np.random.default_rng([0x5EED, int(seed)])
+    lo = border_px
+    hi = np.array([camera.width - 1 - border_px, camera.height - 1 - border_px])
+    ids, uvs, uvs_true = [], [], []
+    for k in range(n):
+        pc = (points_w - r_w[k]) @ R_wc[k]  # R_cw (X - r)
+        front = pc[:, 2] > min_depth_m
+        uv_true, ok = camera.project(np.where(front[:, None], pc, [0.0, 0.0, 1.0]))
+        noisy = uv_true + rng.normal(0.0, noise_px, size=uv_true.shape) if noise_px > 0 else uv_true.copy()
+        inside = lambda uv: np.all((uv >= lo) & (uv <= hi), axis=1)  # noqa: E731
+        keep = np.flatnonzero(front & ok & inside(uv_true) & inside(noisy))
+        ids.append(keep)
+        uvs.append(noisy[keep])
+        uvs_true.append(uv_true[keep])
+    return SogSequence(camera=camera, times_s=t, points_w=points_w, ids=ids, uv=uvs, uv_true=uvs_true,
+                       R_wc=R_wc, r_w=r_w, v_w=v_w, omega_c=omega_c, noise_px=float(noise_px))
+
+
+# --------------------------------------------------------------------------------------------------
+# Driver (the front end's role, with known correspondences)
+
+
+@dataclass
+class SogRunHistory:
+    """Per processed frame: calibration mean (F, 5) and 99 % bounds (F, 5, 2) of the bank, number of
+    Gaussians, map size, measurements used, wall time of the filter calls (s); plus the map from
+    bank feature ids to scene point ids."""
+
+    calibration: np.ndarray
+    bounds_99: np.ndarray
+    num_gaussians: np.ndarray
+    num_features: np.ndarray
+    num_used: np.ndarray
+    filter_time_s: np.ndarray
+    feature_to_point: dict = field(default_factory=dict)
+
+    @property
+    def collapse_frame(self) -> int:
+        """First frame after which the bank holds a single Gaussian (-1 if it never does)."""
+        single = np.flatnonzero(self.num_gaussians == 1)
+        return int(single[0]) if len(single) else -1
+
+
+def track_sequence(bank: Any, sequence: SogSequence, *, max_frames: Optional[int] = None,
+                   min_visible: int = 20, max_new_per_frame: int = 10, min_separation_px: float = 20.0,
+                   seed: int = 0, on_frame: Optional[Callable[[int, Any, Any], None]] = None) -> SogRunHistory:
+    """Run ``bank`` (a :class:`rscalib._core.SogBank`) over ``sequence`` like an image front end:
+
+    per frame: ``predict(dt)``, ``predict_measurements()``, look up each predicted feature's point
+    (found if the point is visible in this frame; the bank's gate plays the search ellipse),
+    ``update``; then, while fewer than ``min_visible`` features were used, add up to
+    ``max_new_per_frame`` visible unmapped points at least ``min_separation_px`` from each other
+    and from the predicted features. ``on_frame(k, bank, report)`` is called after each update.
+    """
+    rng = np.random.default_rng([0xF00D, int(seed)])
+    frames = len(sequence) if max_frames is None else min(max_frames, len(sequence))
+    feature_to_point: dict[int, int] = {}
+    mapped_points: set[int] = set()
+    hist = {k: [] for k in ("calibration", "bounds", "ng", "nf", "used", "time")}
+    for k in range(frames):
+        frame_ids = sequence.ids[k]
+        frame_uv = sequence.uv[k]
+        row_of = {int(p): i for i, p in enumerate(frame_ids)}
+        t0 = time.perf_counter()
+        if k > 0:
+            bank.predict(float(sequence.times_s[k] - sequence.times_s[k - 1]))
+        ids, uv_pred, _ = bank.predict_measurements()
+        t_filter = time.perf_counter() - t0
+        uv = np.full((len(ids), 2), np.nan)
+        matched = np.zeros(len(ids), dtype=bool)
+        for i, fid in enumerate(ids):
+            row = row_of.get(feature_to_point.get(int(fid), -1))
+            if row is not None:
+                uv[i] = frame_uv[row]
+                matched[i] = True
+        t0 = time.perf_counter()
+        report = bank.update(ids, uv, matched)
+        t_filter += time.perf_counter() - t0
+        for fid in report.deleted_feature_ids:
+            mapped_points.discard(feature_to_point.pop(int(fid)))
+        needed = min_visible - int(report.num_used)
+        cap = needed if k == 0 else max_new_per_frame  # the first frame starts the map at once
+        if needed > 0:
+            taken = [uv_pred[i] for i in range(len(ids)) if int(ids[i]) in feature_to_point]
+            candidates = [i for i in rng.permutation(len(frame_ids)) if int(frame_ids[i]) not in mapped_points]
+            chosen = []
+            for i in candidates:
+                if len(chosen) >= min(needed, cap):
+                    break
+                p = frame_uv[i]
+                if all(np.hypot(*(p - q)) >= min_separation_px for q in taken):
+                    chosen.append(i)
+                    taken.append(p)
+            if chosen:
+                t0 = time.perf_counter()
+                new_ids = bank.add_features(frame_uv[chosen])
+                t_filter += time.perf_counter() - t0
+                for fid, i in zip(new_ids, chosen):
+                    feature_to_point[int(fid)] = int(frame_ids[i])
+                    mapped_points.add(int(frame_ids[i]))
+        hist["calibration"].append(np.array(bank.calibration_mean))
+        hist["bounds"].append(np.array(bank.calibration_bounds_99()))
+        hist["ng"].append(bank.num_gaussians)
+        hist["nf"].append(bank.num_features)
+        hist["used"].append(int(report.num_used))
+        hist["time"].append(t_filter)
+        if on_frame is not None:
+            on_frame(k, bank, report)
+    return SogRunHistory(calibration=np.array(hist["calibration"]), bounds_99=np.array(hist["bounds"]),
+                         num_gaussians=np.array(hist["ng"]), num_features=np.array(hist["nf"]),
+                         num_used=np.array(hist["used"]), filter_time_s=np.array(hist["time"]),
+                         feature_to_point=feature_to_point)
