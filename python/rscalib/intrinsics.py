@@ -8,7 +8,6 @@ FileStorage) and result.json.
 """
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +21,7 @@ from .detection.detectors import DETECTOR_VERSION
 from .detection.result import DetectionResult
 from .errors import InputError
 from .io.cameras import camera_from_opencv, opencv_matrices, write_opencv_yaml
+from .io.results import write_result_json
 
 MODELS = ("pinhole-radtan", "pinhole-equidistant")
 PARAM_NAMES = {
@@ -274,5 +274,5 @@ def write_intrinsics(result: IntrinsicsResult, out_dir, detections: Optional[Det
         })
         summary["warnings"] = list(detections.warnings) + summary["warnings"]
     summary.update(extra or {})
-    json_path.write_text(json.dumps(summary, indent=2))
+    write_result_json(out, summary, command="intrinsics", inputs=(extra or {}).get("inputs"))
     return camera_path, json_path

@@ -1,4 +1,4 @@
-"""`rscalib flicker`: line delay from the bands of a light flickering at a known frequency (SPEC §5).
+"""`rscalib flicker`: line delay from the bands of a light flickering at a known frequency (docs/formulation.md, flicker).
 
 Exit codes: 0 determined; 2 bad input (missing file, frequency <= 0, bad region...); 3 the data do
 not determine the line delay — no flicker bands found, aliasing, or too uncertain — with
@@ -8,12 +8,9 @@ not 2: the input is valid, it just does not contain the answer.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
-
-import numpy as np
 
 from ..errors import InputError
 from .common import EXIT_OK, EXIT_UNDETERMINED
@@ -55,56 +52,15 @@ def _check(args) -> None:
         raise InputError(f"not found: {args.source}")
 
 
-def plot_flicker(result, path: Path) -> None:
-    """Row profiles with the fitted flicker model, and the per-frame (or per-block) estimates."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), dpi=90)
-    ax = axes[0]
-    plot = result.plot
-    if plot.get("observed") is not None:
-        for k, frame in enumerate(plot["frames"]):
-            offset = 2.5 * k * max(result.modulation_depth, 0.02) if math.isfinite(result.modulation_depth) else 0.0
-            line, = ax.plot(plot["rows_v"], plot["observed"][k] + offset, ".", ms=1.5, alpha=0.5)
-            ax.plot(plot["rows_v"], plot["model"][k] + offset, "-", lw=1.0, color=line.get_color(),
-                    label=f"frame {frame}")
-        ax.legend(fontsize=7, loc="upper right")
-    ax.set_xlabel("image row v")
-    ax.set_ylabel("log row profile - scene (offset)")
-    ax.set_title(f"{result.frequency_hz:g} Hz: period {result.period_rows:.1f} rows ({result.method})", fontsize=9)
-
-    ax = axes[1]
-    spread = np.asarray(result.spread_line_delays_s) * 1e6
-    if len(spread):
-        ax.plot(np.arange(len(spread)), spread, "o", ms=3, label=f"per {result.spread_label}")
-    if math.isfinite(result.line_delay_s):
-        d_us, s_us = result.line_delay_s * 1e6, result.line_delay_std_s * 1e6
-        ax.axhline(d_us, color="k", lw=1, label=f"d = {d_us:.5g} us/row")
-        if math.isfinite(s_us):
-            ax.axhspan(d_us - s_us, d_us + s_us, color="k", alpha=0.15, label="±1 std")
-        ax.legend(fontsize=7)
-    ax.set_xlabel(result.spread_label)
-    ax.set_ylabel("line delay (us/row)")
-    ax.ticklabel_format(axis="y", useOffset=False)
-    ax.set_title("estimates" + ("" if result.determined else " (NOT determined)"), fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-
-
 def run(args: argparse.Namespace) -> int:
     from ..flicker.estimate import estimate_line_delay_flicker
+    from ..flicker.report import write_flicker_outputs
 
     _check(args)
     result = estimate_line_delay_flicker(args.source, args.frequency, rows=args.rows, roi=args.roi,
                                          max_frames=args.max_frames, method=args.method, progress=not args.quiet)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    summary = result.summary_dict() | {"source": str(args.source)}
-    (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
-    plot_flicker(result, out / "flicker.png")
+    write_flicker_outputs(result, out, source=args.source)
     if result.determined:
         print(f"line delay {result.line_delay_s * 1e6:.5f} +- {result.line_delay_std_s * 1e6:.5f} us/row, "
               f"readout {result.readout_time_s * 1e3:.4f} ms ({result.method}, {result.frames_used} frames, "
