@@ -6,18 +6,19 @@ PIP    := $(PY) -m pip
 BUILD  := build/py
 PIP_BUILD_FLAGS := --no-build-isolation -C build-dir=$(BUILD) -C cmake.define.RSCALIB_BUILD_TESTS=ON
 
-.PHONY: all deps venv install test test-cpp test-python demo bench stubs clean
+.PHONY: all deps venv install lint test test-cpp test-python demo bench stubs clean
 
 all: install
 
 deps:
 	bash scripts/install-system-deps.sh
 
-$(VENV)/.deps-stamp: pyproject.toml
+# Pinned: the checked-in _core.pyi and the lint verdicts depend on these tools' versions.
+$(VENV)/.deps-stamp: pyproject.toml Makefile
 	test -x $(PY) || python3 -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
-	$(PIP) install -q "scikit-build-core>=0.10" "pybind11>=2.12" "cmake>=3.22" ninja "pytest>=7" \
-	  "numpy>=1.24" "scipy>=1.10" "opencv-python-headless>=4.8,<5" "matplotlib>=3.7" "rich>=13" "pyyaml>=6"
+	$(PIP) install -q "scikit-build-core>=0.10" "pybind11==3.1.0" "cmake>=3.22" ninja "pytest>=7" \
+	  "numpy>=1.24" "scipy>=1.10" "ruff==0.17.6" "pybind11-stubgen==3.0.0" "opencv-python-headless>=4.8,<5" "matplotlib>=3.7" "rich>=13" "pyyaml>=6"
 	touch $@
 
 venv: $(VENV)/.deps-stamp
@@ -33,7 +34,12 @@ test-cpp: install
 test-python: install
 	$(PY) -m pytest -q tests/python
 
-test: test-cpp test-python
+# Style is checked, not hoped for: ruff (pyproject.toml) and clang-format (.clang-format).
+lint: deps venv
+	$(VENV)/bin/ruff check python tests benchmarks
+	bash scripts/check-format.sh
+
+test: lint test-cpp test-python
 
 demo: install
 	$(VENV)/bin/rscalib demo
@@ -41,8 +47,8 @@ demo: install
 bench: install
 	$(PY) benchmarks/bench_spline.py
 
+# Regenerate python/rscalib/_core.pyi from the built extension (tests/python/test_stubs.py fails when stale).
 stubs: install
-	$(PIP) install -q pybind11-stubgen
 	$(VENV)/bin/pybind11-stubgen rscalib._core -o python
 
 clean:

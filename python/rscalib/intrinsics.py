@@ -1,4 +1,4 @@
-"""Intrinsic calibration from target detections with OpenCV (SPEC §3).
+"""Intrinsic calibration from target detections with OpenCV (Zhang 2000, as in cv2.calibrateCamera).
 
 `calibrate_intrinsics` picks views (all of them for a few stills; for a video the sharpest,
 most varied `max_views`), runs cv2.calibrateCameraExtended (pinhole-radtan) or

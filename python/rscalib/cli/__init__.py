@@ -1,4 +1,4 @@
-"""The `rscalib` command line: one entry point, a subcommand per job (SPEC §5).
+"""The `rscalib` command line: one entry point, a subcommand per job (README: the commands).
 
 Exit codes: 0 success; 2 bad input (one line on stderr, no traceback); 3 the data does
 not determine the answer (results are still written, with the warning).

@@ -1,4 +1,4 @@
-"""Shared pieces of the subcommands: exit codes (SPEC §5)."""
+"""Shared pieces of the subcommands: exit codes (README: exit codes)."""
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2       # a one-line reason on stderr, no traceback

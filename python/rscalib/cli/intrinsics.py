@@ -1,4 +1,4 @@
-"""`rscalib intrinsics`: intrinsic calibration from stills or a video of a target (SPEC §3, §5)."""
+"""`rscalib intrinsics`: intrinsic calibration from stills or a video of a target."""
 from __future__ import annotations
 
 import argparse

@@ -1,4 +1,4 @@
-"""Line delay from the bands of a flickering light (the LED method of Geyer et al.; SPEC §5).
+"""Line delay from the bands of a flickering light (the LED method of Geyer et al. [14] in Oth et al. 2013, §2 and §5).
 
 A light whose intensity repeats at ``frequency_hz`` (f) multiplies row v of frame i by
 g(t_i + v d) (docs/conventions.md: row v of frame i is exposed at t_i + v d), so a rolling-shutter

@@ -1,5 +1,5 @@
 """Camera files: read OpenCV FileStorage YAML and Kalibr camchains; write them back (with the
-line delay) plus Gyroflow lens profiles (SPEC §5).
+line delay) plus Gyroflow lens profiles.
 
 OpenCV writes a `%YAML:1.0` header and `!!opencv-matrix` tags that PyYAML cannot read, so
 OpenCV files go through cv2.FileStorage; Kalibr files are plain YAML.

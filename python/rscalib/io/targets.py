@@ -1,4 +1,4 @@
-"""Calibration targets: Kalibr-style YAML definitions and their point layouts (SPEC §5).
+"""Calibration targets: Kalibr-style YAML definitions and their point layouts (docs/conventions.md: target frames).
 
 Every target point has a fixed id (its row in `Target.points_m`), so a detection is a list of
 (id, pixel) pairs and partial views need no special handling downstream. Points lie on z = 0,
