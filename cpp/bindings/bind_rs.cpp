@@ -26,7 +26,8 @@ RsObservations MakeObservations(const Eigen::VectorXd& frame_time_s, const Eigen
 }  // namespace
 
 void BindRs(py::module_& m) {
-  py::class_<RsSolverOptions>(m, "RsSolverOptions", "Options of the line-delay solve (SPEC §2).")
+  py::class_<RsSolverOptions>(m, "RsSolverOptions",
+                              "Options of the line-delay solve (docs/formulation.md).")
       .def(py::init<>())
       .def_readwrite("pixel_sigma", &RsSolverOptions::pixel_sigma, "R = sigma^2 I, px")
       .def_readwrite("standardise_errors", &RsSolverOptions::standardise_errors)
@@ -100,7 +101,8 @@ void BindRs(py::module_& m) {
       "Residuals and per-segment statistics at the given estimate, without solving.");
 
   m.def("error_noise_map", &rs::ErrorNoiseMap, py::arg("line_delay_s"),
-        py::arg("image_velocity_px_s"), "A = I - d [[0, u_dot], [0, v_dot]] (SPEC §2).");
+        py::arg("image_velocity_px_s"),
+        "A = I - d [[0, u_dot], [0, v_dot]] (Oth et al. 2013, eq. 15-21; docs/formulation.md §4).");
 
   m.def(
       "standardisation_weight",
