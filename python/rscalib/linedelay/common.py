@@ -1,7 +1,9 @@
 """What both trajectory models (spline.py, linear.py) share: input checks, the PnP seed,
-the choice of the pixel noise, the frame rate and when d counts as determined."""
+the choice of the pixel noise, the frame rate, when d counts as determined, the warnings every
+solve can raise and the fields their result.json summaries have in common."""
 from __future__ import annotations
 
+import math
 from typing import Optional
 
 import numpy as np
@@ -70,3 +72,63 @@ def frame_rate_hz(observations: Observations) -> float:
     if len(intervals) == 0 or not np.median(intervals) > 0:
         raise InputError("cannot determine the frame rate from the timestamps")
     return float(1.0 / np.median(intervals))
+
+
+def assess_noise_and_determinacy(summary, sigma: float, sigma_source: str, nominal_delay_s: float,
+                                 warnings: list, *, estimate: bool = True) -> tuple[float, float, bool]:
+    """(J/2N, pixel sigma, determined) of a solver summary (`_core.RsSolveSummary` or
+    `LinearInterpSummary`), appending the warnings.
+
+    The pixel sigma is replaced by the residual RMS when the grid gave no estimate (then J/2N carries
+    no information, docs/formulation.md §8). d counts as determined when its covariance is full rank
+    and sigma_d < UNDETERMINED_STD_FRACTION of the nominal full-frame delay (§9); with a known d
+    (estimate=False) it is not judged."""
+    cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
+    if sigma_source == "residuals":
+        sigma = summary.rms_px
+        warnings.append("pixel sigma could not be estimated from the target grid; using the residual RMS "
+                        f"({sigma:.3f} px), so J/2N carries no information")
+    determined = True
+    std = summary.line_delay_std_s
+    if estimate and not (summary.covariance_ok and math.isfinite(std)
+                         and std < UNDETERMINED_STD_FRACTION * nominal_delay_s):
+        determined = False
+        warnings.append("the line delay is not determined by this data (too little or the wrong kind of "
+                        f"motion): sigma_d = {std * 1e6 if math.isfinite(std) else float('inf'):.3g} us; "
+                        "move the camera faster, mostly rotating about its x and y axes")
+    return cost, sigma, determined
+
+
+def solve_warnings(summary, warnings: list) -> None:
+    """The warnings of the last solve of either model: unprojectable observations, no convergence."""
+    if summary.unprojectable:
+        warnings.append(f"{summary.unprojectable} observations could not be projected and were ignored")
+    if not summary.converged:
+        warnings.append(f"the final solve did not report convergence: {summary.message}")
+
+
+def summary_fields(result, knots: int, **model_fields) -> dict:
+    """The JSON-ready fields both results have (LineDelayResult, LinearInterpResult), in their
+    result.json order; `model_fields` stand between the trajectory size and the fit statistics."""
+    std = result.line_delay_std_s
+    return {
+        "line_delay_s": result.line_delay_s,
+        "line_delay_std_s": std if math.isfinite(std) else None,
+        "readout_time_s": result.readout_time_s,
+        "rows": result.rows,
+        "frames_total": result.frames_total,
+        "frames_used": result.frames_used,
+        "observations": result.observations,
+        "knots": int(knots),
+        "segments": result.num_segments,
+        **model_fields,
+        "rms_px": result.rms_px,
+        "normalised_cost": result.normalised_cost,
+        "pixel_sigma": result.pixel_sigma,
+        "pixel_sigma_source": result.pixel_sigma_source,
+        "converged": result.converged,
+        "determined": result.determined,
+        "warnings": list(result.warnings),
+        "initial_line_delay_s": result.initial_line_delay_s,
+        "solve_time_s": result.solve_time_s,
+    }

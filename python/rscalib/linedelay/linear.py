@@ -25,7 +25,15 @@ from .. import _core
 from .._core import CameraModel
 from ..errors import InputError
 from ..observations import Observations
-from .common import UNDETERMINED_STD_FRACTION, check_inputs, choose_pixel_sigma, frame_rate_hz, seed_poses
+from .common import (
+    assess_noise_and_determinacy,
+    check_inputs,
+    choose_pixel_sigma,
+    frame_rate_hz,
+    seed_poses,
+    solve_warnings,
+    summary_fields,
+)
 from .pnp import FramePoses
 
 TRAJECTORY_MODEL = "linear"
@@ -116,32 +124,11 @@ class LinearInterpResult:
     def summary_dict(self) -> dict:
         """JSON-ready fields, the keys of LineDelayResult.summary_dict where they apply.
         knots: the frame poses (the interpolant's knots); segments: interpolated intervals."""
-        std = self.line_delay_std_s
-        return {
-            "trajectory_model": self.trajectory_model,
-            "line_delay_s": self.line_delay_s,
-            "line_delay_std_s": std if math.isfinite(std) else None,
-            "readout_time_s": self.readout_time_s,
-            "rows": self.rows,
-            "frames_total": self.frames_total,
-            "frames_used": self.frames_used,
-            "observations": self.observations,
-            "knots": int(len(self.frame_times_s)),
-            "segments": self.num_segments,
-            "chains": self.num_chains,
-            "isolated_observations": self.isolated_observations,
-            "extrapolated_observations": self.extrapolated_observations,
-            "max_frame_interval_s": self.max_frame_interval_s,
-            "rms_px": self.rms_px,
-            "normalised_cost": self.normalised_cost,
-            "pixel_sigma": self.pixel_sigma,
-            "pixel_sigma_source": self.pixel_sigma_source,
-            "converged": self.converged,
-            "determined": self.determined,
-            "warnings": list(self.warnings),
-            "initial_line_delay_s": self.initial_line_delay_s,
-            "solve_time_s": self.solve_time_s,
-        }
+        return {"trajectory_model": self.trajectory_model,
+                **summary_fields(self, len(self.frame_times_s), chains=self.num_chains,
+                                 isolated_observations=self.isolated_observations,
+                                 extrapolated_observations=self.extrapolated_observations,
+                                 max_frame_interval_s=self.max_frame_interval_s)}
 
 
 def calibrate_line_delay_linear(observations: Observations, camera: CameraModel, rows: Optional[int] = None, *,
@@ -190,22 +177,11 @@ def calibrate_line_delay_linear(observations: Observations, camera: CameraModel,
     linked = np.zeros(len(frame_times), dtype=bool)
     linked[:-1] = np.diff(frame_times) <= summary.max_frame_interval_s
 
-    cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
-    if sigma_source == "residuals":
-        sigma = summary.rms_px
-        warnings.append("pixel sigma could not be estimated from the target grid; using the residual RMS "
-                        f"({sigma:.3f} px), so J/2N carries no information")
-    determined = bool(summary.covariance_ok and math.isfinite(std) and std < UNDETERMINED_STD_FRACTION * nominal_delay_s)
-    if not determined:
-        warnings.append("the line delay is not determined by this data (too little or the wrong kind of "
-                        f"motion): sigma_d = {std * 1e6 if math.isfinite(std) else float('inf'):.3g} us")
+    cost, sigma, determined = assess_noise_and_determinacy(summary, sigma, sigma_source, nominal_delay_s, warnings)
     if summary.isolated:
         warnings.append(f"{summary.isolated} observations were dropped: their frame has no neighbouring frame "
                         "to interpolate with")
-    if summary.unprojectable:
-        warnings.append(f"{summary.unprojectable} observations could not be projected and were ignored")
-    if not summary.converged:
-        warnings.append(f"the solve did not report convergence: {summary.message}")
+    solve_warnings(summary, warnings)
 
     return LinearInterpResult(
         line_delay_s=d, line_delay_std_s=std, readout_time_s=d * rows, rows=rows, frame_times_s=frame_times,

@@ -1,4 +1,4 @@
-"""Rolling-shutter line-delay calibration (SPEC §2; Oth et al. 2013 §3-4).
+"""Rolling-shutter line-delay calibration (Oth et al. 2013 §3-4; docs/formulation.md §1-9).
 
 Pipeline: per-frame GS PnP -> rotation-vector unwrapping (eq. 22) -> smoothing spline with
 deliberately few uniform knots -> joint Ceres solve of trajectory and line delay -> adaptive
@@ -18,7 +18,15 @@ from .. import _core
 from .._core import BSpline, CameraModel
 from ..errors import InputError
 from ..observations import Observations
-from .common import UNDETERMINED_STD_FRACTION, check_inputs, choose_pixel_sigma, frame_rate_hz, seed_poses
+from .common import (
+    assess_noise_and_determinacy,
+    check_inputs,
+    choose_pixel_sigma,
+    frame_rate_hz,
+    seed_poses,
+    solve_warnings,
+    summary_fields,
+)
 from .pnp import FramePoses
 
 # diag(Q) of the acceleration prior, [m^2/s^3 x3, rad^2/s^3 x3]: a hand-held camera's
@@ -83,26 +91,8 @@ class LineDelayResult:
         return len(self.knots) - 1
 
     def summary_dict(self) -> dict:
-        """JSON-ready fields of SPEC §5."""
-        return {
-            "line_delay_s": self.line_delay_s,
-            "line_delay_std_s": self.line_delay_std_s if math.isfinite(self.line_delay_std_s) else None,
-            "readout_time_s": self.readout_time_s,
-            "rows": self.rows,
-            "frames_total": self.frames_total,
-            "frames_used": self.frames_used,
-            "observations": self.observations,
-            "knots": int(len(self.knots)),
-            "segments": self.num_segments,
-            "rms_px": self.rms_px,
-            "normalised_cost": self.normalised_cost,
-            "pixel_sigma": self.pixel_sigma,
-            "pixel_sigma_source": self.pixel_sigma_source,
-            "converged": self.converged,
-            "determined": self.determined,
-            "warnings": list(self.warnings),
-            "initial_line_delay_s": self.initial_line_delay_s,
-            "solve_time_s": self.solve_time_s,
+        """JSON-ready fields (the result.json of `rscalib linedelay`, docs/architecture.md)."""
+        return summary_fields(self, len(self.knots)) | {
             "history": [vars(r) | {"line_delay_std_s": r.line_delay_std_s if math.isfinite(r.line_delay_std_s) else None}
                         for r in self.history],
         }
@@ -174,7 +164,7 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                          robust_loss: str = "none",
                          num_threads: int = 2,
                          progress: Optional[Callable[[RoundRecord], None]] = None) -> LineDelayResult:
-    """Estimate the line delay d (s/row) and the continuous-time trajectory (SPEC §2).
+    """Estimate the line delay d (s/row) and the continuous-time trajectory (Oth et al. 2013 §3-4).
 
     observations: detected target points with frame timestamps; camera: known intrinsics;
     rows: image rows read out (default: image height). pixel_sigma: detection noise in px
@@ -280,19 +270,8 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     history[-1].iterations += summary.iterations
     history[-1].solve_time_s += summary.solve_time_s
 
-    cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
-    if sigma_source == "residuals":
-        # No grid structure to estimate the noise from: take it from the residuals.
-        sigma = summary.rms_px
-        warnings.append("pixel sigma could not be estimated from the target grid; using the residual RMS "
-                        f"({sigma:.3f} px), so J/2N carries no information")
-    determined = True
-    if estimate:
-        if not (summary.covariance_ok and math.isfinite(std) and std < UNDETERMINED_STD_FRACTION * nominal_delay_s):
-            determined = False
-            warnings.append("the line delay is not determined by this data (too little or the wrong kind of "
-                            f"motion): sigma_d = {std * 1e6 if math.isfinite(std) else float('inf'):.3g} us; "
-                            "move the camera faster, mostly rotating about its x and y axes")
+    cost, sigma, determined = assess_noise_and_determinacy(summary, sigma, sigma_source, nominal_delay_s, warnings,
+                                                           estimate=estimate)
     if cost > 1.5 and adaptive_knots and history[-1].segments_at_cap > 0:
         warnings.append(f"{history[-1].segments_at_cap} trajectory segments are at the shortest allowed length "
                         f"({min_segment_s * 1e3:.1f} ms) and still fit badly: the motion is faster than the spline can "
@@ -305,10 +284,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     if summary.clamped_weights:
         warnings.append(f"{summary.clamped_weights} observations move down the image nearly as fast as the "
                         "shutter; their error weights were clamped")
-    if summary.unprojectable:
-        warnings.append(f"{summary.unprojectable} observations could not be projected and were ignored")
-    if not summary.converged:
-        warnings.append(f"the final solve did not report convergence: {summary.message}")
+    solve_warnings(summary, warnings)
 
     return LineDelayResult(
         line_delay_s=d, line_delay_std_s=std, readout_time_s=d * rows, rows=rows,
