@@ -31,10 +31,12 @@ def _round_printer(r) -> None:
           f"J/2N = {r.normalised_cost:8.3f}, {r.segments_split} split ({r.solve_time_s:.2f} s)")
 
 
-def run(args: argparse.Namespace) -> int:
-    from .._core import CameraModel
-    from ..linedelay.spline import calibrate_line_delay
+def _detection_printer(detection) -> None:
+    print(f"  detected the board in {detection.frames_detected} of {detection.frames_total} frames "
+          f"({detection.observations.num_observations} corners)")
 
+
+def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     line_delay_s = args.line_delay_us * 1e-6
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="rscalib-demo-"))
@@ -42,28 +44,29 @@ def run(args: argparse.Namespace) -> int:
     print(f"rscalib {__version__} demo: {args.duration:g} s of hand-held 30 fps video of a 9x6 checkerboard, "
           f"640x480, rolling shutter d = {args.line_delay_us:g} us/row")
     if args.observations_only:
+        from .._core import CameraModel
+        from ..linedelay.spline import calibrate_line_delay
         from ..sim import target_observations as simulate
 
         sim = simulate.simulate_default(line_delay_s=line_delay_s, duration_s=args.duration, seed=args.seed)
         c = sim.camera
         camera = CameraModel(c.model, c.params, c.width, c.height)
-        observations, frames_total = sim.observations, sim.observations.num_frames
-        print(f"  simulated {observations.num_observations} corner observations (exact RS projection, 0.3 px noise)")
+        print(f"  simulated {sim.observations.num_observations} corner observations (exact RS projection, "
+              "0.3 px noise)")
+        video_run = None
+        result = calibrate_line_delay(sim.observations, camera, progress=_round_printer)
     else:
-        from ..detection.pipeline import detect_video
-        from ..io.cameras import load_camera
+        from ..linedelay.pipeline import calibrate_video
         from ..sim.target_video import render_video
 
-        print(f"  rendering into {out / 'video'} (every row at its own time) ...")
-        render_video(out / "video", line_delay_s=line_delay_s, duration_s=args.duration, seed=args.seed,
-                     supersample=2, progress=True)
-        camera = load_camera(out / "video" / "camera.yaml").camera
-        detection = detect_video(out / "video" / "video.avi", out / "video" / "target.yaml",
-                                 cache_dir=out / "cache", progress=True)
-        observations, frames_total = detection.observations, detection.frames_total
-        print(f"  detected the board in {detection.frames_detected} of {frames_total} frames "
-              f"({observations.num_observations} corners)")
-    result = calibrate_line_delay(observations, camera, progress=_round_printer)
+        video = out / "video"
+        print(f"  rendering into {video} (every row at its own time) ...")
+        render_video(video, line_delay_s=line_delay_s, duration_s=args.duration, seed=args.seed, supersample=2,
+                     progress=True)
+        video_run = calibrate_video(video / "video.avi", video / "target.yaml", video / "camera.yaml",
+                                    cache_dir=out / "cache", progress=True, on_detection=_detection_printer,
+                                    on_round=_round_printer)
+        result, camera = video_run.result, video_run.camera
     error = result.line_delay_s - line_delay_s
     std = result.line_delay_std_s
     print(f"  truth     d = {line_delay_s * 1e6:.3f} us/row  (readout {line_delay_s * camera.height * 1e3:.3f} ms)")
@@ -74,10 +77,10 @@ def run(args: argparse.Namespace) -> int:
               f"(estimated), J/2N {result.normalised_cost:.3f}, rms {result.rms_px:.3f} px")
     for w in result.warnings:
         print(f"  warning: {w}")
-    if not args.observations_only:
-        from ..linedelay.report import write_outputs
+    if video_run is not None:
+        from ..linedelay.report import write_video_outputs
 
-        write_outputs(result, camera, out / "result", frames_total=frames_total, fps=30.0)
+        write_video_outputs(video_run, out / "result", command="demo")
         print(f"  report: {out / 'result' / 'report.html'}")
     print(f"  took {time.perf_counter() - started:.1f} s")
     return EXIT_OK

@@ -1,14 +1,14 @@
 """`rscalib linedelay` and `rscalib localize`: video of a target -> line delay (or, with a
-known line delay, the continuous-time trajectory) with report and camera files (SPEC §5)."""
+known line delay, the continuous-time trajectory) with report and camera files.
+
+Parse the options, run rscalib.linedelay.pipeline (video -> result), write the outputs with
+rscalib.linedelay.report, print the result; docs/architecture.md has the data path."""
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
-
-import numpy as np
 
 from ..errors import InputError
 from .common import EXIT_OK, EXIT_UNDETERMINED
@@ -58,16 +58,18 @@ def add_parser(sub) -> None:
     q.set_defaults(func=run_localize)
 
 
-def _check_paths(args) -> None:
-    if not Path(args.video).exists():
-        raise InputError(f"video not found: {args.video}")
-    for name in ("target", "camera"):
-        if not Path(getattr(args, name)).is_file():
-            raise InputError(f"{name} file not found: {getattr(args, name)}")
+def _check_flags(args) -> None:
+    """One-line errors for option values that mean nothing (before the slow detection)."""
     if args.pixel_sigma is not None and not args.pixel_sigma > 0:
         raise InputError("--pixel-sigma must be positive")
     if args.rows is not None and args.rows <= 0:
         raise InputError("--rows must be positive")
+    if getattr(args, "uniform_knots", None) is not None and args.uniform_knots < 1:
+        raise InputError("--uniform-knots must be at least 1")
+    if getattr(args, "max_rounds", 1) < 1:
+        raise InputError("--max-rounds must be at least 1")
+    if getattr(args, "line_delay", None) is not None and not math.isfinite(args.line_delay):
+        raise InputError("--line-delay must be a finite number")
 
 
 def _say(args, text: str) -> None:
@@ -75,28 +77,21 @@ def _say(args, text: str) -> None:
         print(text, file=sys.stderr)
 
 
-def _detect(args, camera):
-    from ..detection.pipeline import detect_video
-    from ..io.targets import load_target
-
-    target = load_target(args.target)
-    detection = detect_video(args.video, target, workers=args.workers, cache=not args.no_cache,
-                             progress=not args.quiet)
-    if detection.observations.num_observations == 0:
-        raise InputError(f"the target was not detected in any of the {detection.frames_total} frames "
-                         "(wrong target file or size?)")
-    if tuple(detection.image_size) != (camera.width, camera.height):
-        raise InputError(f"the video is {detection.image_size[0]}x{detection.image_size[1]} but the camera file is "
-                         f"{camera.width}x{camera.height}")
-    for w in detection.warnings:
-        _say(args, f"warning: {w}")
-    _say(args, f"detection: target in {detection.frames_detected} of {detection.frames_total} frames"
-         + (" (cached)" if detection.from_cache else "")
-         + ("; dropped: " + ", ".join(f"{k} {v}" for k, v in detection.dropped.items()) if detection.dropped else ""))
-    return detection
+def _on_detection(args, solving: str):
+    """Prints the detection's warnings and counts, then what is estimated next."""
+    def report(detection) -> None:
+        for w in detection.warnings:
+            _say(args, f"warning: {w}")
+        _say(args, f"detection: target in {detection.frames_detected} of {detection.frames_total} frames"
+             + (" (cached)" if detection.from_cache else "")
+             + ("; dropped: " + ", ".join(f"{k} {v}" for k, v in detection.dropped.items())
+                if detection.dropped else ""))
+        if solving:
+            _say(args, solving)
+    return report
 
 
-def _progress(args):
+def _on_round(args):
     if args.quiet:
         return None
 
@@ -106,182 +101,56 @@ def _progress(args):
     return report
 
 
-def _fps(observations) -> float:
-    return float(1.0 / np.median(np.diff(observations.frame_times_s))) if observations.num_frames > 1 else 0.0
+def _common_options(args, solving: str) -> dict:
+    return dict(rows=args.rows, pixel_sigma=args.pixel_sigma, robust_loss=args.robust, workers=args.workers,
+                cache=not args.no_cache, progress=not args.quiet, on_detection=_on_detection(args, solving),
+                on_round=_on_round(args))
 
 
-def _check_model_options(args) -> None:
-    """One-line errors for option combinations that mean nothing."""
-    if args.uniform_knots is not None and args.uniform_knots < 1:
-        raise InputError("--uniform-knots must be at least 1")
-    if args.max_rounds < 1:
-        raise InputError("--max-rounds must be at least 1")
-    if args.trajectory == "linear":
-        spline_only = [name for name, used in (("--uniform-knots", args.uniform_knots is not None),
-                                               ("--no-standardise", args.no_standardise),
-                                               ("--no-motion-prior", args.no_motion_prior)) if used]
-        if spline_only:
-            raise InputError(f"{', '.join(spline_only)} only apply to --trajectory spline (the linear model has "
-                             "no knots, no motion prior and unstandardised errors)")
+def _print_warnings(summary: dict) -> None:
+    for w in summary["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
 
 
 def run_linedelay(args) -> int:
-    from ..io.cameras import load_camera
-    from ..linedelay.report import write_outputs
-    from ..linedelay.spline import calibrate_line_delay
+    from ..linedelay.pipeline import calibrate_video
+    from ..linedelay.report import write_video_outputs
 
-    _check_paths(args)
-    _check_model_options(args)
-    camera = load_camera(args.camera).camera
-    detection = _detect(args, camera)
-    extra = {"video": str(args.video), "detection_dropped": detection.dropped,
-             "frames_detected": detection.frames_detected, "timestamps_from": detection.timestamps,
-             "detection_time_s": detection.detect_time_s}
-    if args.trajectory == "linear":
-        return _run_linedelay_linear(args, camera, detection, extra)
-    _say(args, "estimating trajectory and line delay:")
-    knots = {} if args.uniform_knots is None else {"num_segments": args.uniform_knots, "adaptive_knots": False}
-    result = calibrate_line_delay(detection.observations, camera, args.rows, pixel_sigma=args.pixel_sigma,
-                                  robust_loss=args.robust, max_rounds=args.max_rounds,
-                                  standardise_errors=not args.no_standardise,
-                                  use_motion_prior=not args.no_motion_prior, progress=_progress(args), **knots)
-    result.warnings[:0] = list(detection.warnings)
-    extra |= {"trajectory_model": "spline", "standardise_errors": not args.no_standardise,
-              "motion_prior": not args.no_motion_prior, "adaptive_knots": args.uniform_knots is None}
-    summary = write_outputs(result, camera, args.out, frames_total=detection.frames_total, extra=extra,
-                            fps=_fps(detection.observations))
+    _check_flags(args)
+    solving = ("estimating per-frame poses and line delay (linear interpolation):" if args.trajectory == "linear"
+               else "estimating trajectory and line delay:")
+    run = calibrate_video(args.video, args.target, args.camera, model=args.trajectory, max_rounds=args.max_rounds,
+                          uniform_knots=args.uniform_knots, standardise_errors=not args.no_standardise,
+                          use_motion_prior=not args.no_motion_prior, **_common_options(args, solving))
+    summary = write_video_outputs(run, args.out)
+    result = run.result
     std = result.line_delay_std_s
+    verdict = ("(linear-interpolation baseline)" if run.model == "linear"
+               else summary["verdict"]["headline"].split(": ")[-1])
     print(f"line delay {result.line_delay_s * 1e6:.4f} +- {std * 1e6 if math.isfinite(std) else float('inf'):.4f} "
-          f"us/row, readout {result.readout_time_s * 1e3:.4f} ms; J/2N {result.normalised_cost:.3f}; "
-          f"{summary['verdict']['headline'].split(': ')[-1]}")
-    for w in summary["warnings"]:
-        print(f"warning: {w}", file=sys.stderr)
+          f"us/row, readout {result.readout_time_s * 1e3:.4f} ms; J/2N {result.normalised_cost:.3f}"
+          + (" " if run.model == "linear" else "; ") + verdict)
+    _print_warnings(summary)
     print(f"report: {Path(args.out) / 'report.html'}")
-    return EXIT_OK if result.determined else EXIT_UNDETERMINED
-
-
-def _run_linedelay_linear(args, camera, detection, extra) -> int:
-    """The linear/SLERP baseline: result.json, trajectory.csv and the camera files (the
-    spline-specific plots and report.html are not written)."""
-    from ..io.cameras import write_camera_set
-    from ..linedelay.linear import calibrate_line_delay_linear
-
-    _say(args, "estimating per-frame poses and line delay (linear interpolation):")
-    result = calibrate_line_delay_linear(detection.observations, camera, args.rows, pixel_sigma=args.pixel_sigma,
-                                         robust_loss=args.robust)
-    warnings = list(detection.warnings) + list(result.warnings)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    obs = result.used_observations
-    times = np.sort(np.concatenate([obs.frame_times_s, obs.frame_times_s + 0.5 * result.readout_time_s]))
-    _write_states_csv(out / "trajectory.csv", times, result.evaluate(times))
-    files = {"trajectory_csv": "trajectory.csv"}
-    camera_files, camera_warnings = write_camera_set(camera, out, result.line_delay_s, fps=_fps(detection.observations),
-                                                     rms_px=result.rms_px)
-    files |= camera_files
-    warnings += camera_warnings
-    summary = result.summary_dict() | {"frames_total": detection.frames_total} | extra
-    summary["warnings"] = warnings
-    summary["files"] = files
-    (out / "result.json").write_text(json.dumps(summary, indent=2))
-    std = result.line_delay_std_s
-    print(f"line delay {result.line_delay_s * 1e6:.4f} +- {std * 1e6 if math.isfinite(std) else float('inf'):.4f} "
-          f"us/row, readout {result.readout_time_s * 1e3:.4f} ms; J/2N {result.normalised_cost:.3f} "
-          "(linear-interpolation baseline)")
-    for w in warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    print(f"results: {out / 'result.json'}")
-    return EXIT_OK if result.determined else EXIT_UNDETERMINED
-
-
-def _write_states_csv(path: Path, times, states) -> None:
-    """The trajectory CSV of report.write_trajectory_csv: t_s, p (3), phi (3); rows without a
-    pose are left out."""
-    ok = np.all(np.isfinite(states), axis=1)
-    header = "t_s,p_x_m,p_y_m,p_z_m,phi_x_rad,phi_y_rad,phi_z_rad"
-    np.savetxt(path, np.c_[np.asarray(times)[ok], states[ok]], delimiter=",", header=header, comments="",
-               fmt="%.9f")
-
-
-def _run_localize_gs_pnp(args, camera, line_delay) -> int:
-    """Per-frame GS PnP poses, each stamped at its frame's mid-readout time t_i + rows d / 2
-    (the time a global-shutter fit of a rolling-shutter frame best represents), or at t_i
-    when no line delay is known."""
-    from .. import _core
-    from ..linedelay.pnp import per_frame_pnp
-
-    detection = _detect(args, camera)
-    obs = detection.observations
-    rows = args.rows if args.rows is not None else obs.image_size[1]
-    poses = per_frame_pnp(obs, camera)
-    if np.count_nonzero(poses.ok) == 0:
-        raise InputError("no frame has enough target points for a PnP pose")
-    readout_s = (line_delay or 0.0) * rows
-    times = obs.frame_times_s[poses.ok] + 0.5 * readout_s
-    states = np.c_[poses.translation[poses.ok], _core.unwrap_rotation_vectors(poses.rotation_vector[poses.ok])]
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    _write_states_csv(out / "trajectory.csv", times, states)
-    rms = float(np.sqrt(np.nanmean(poses.rms_px[poses.ok] ** 2)))
-    summary = {"trajectory_model": "gs-pnp", "frames_total": detection.frames_total,
-               "frames_used": int(np.count_nonzero(poses.ok)),
-               "observations": int(np.sum(np.bincount(obs.frame_index, minlength=obs.num_frames)[poses.ok])),
-               "rms_px": rms, "line_delay_s": line_delay, "readout_time_s": readout_s if line_delay else None,
-               "time_reference": "mid-readout" if line_delay else "row 0 (no line delay given)",
-               "warnings": list(detection.warnings), "files": {"trajectory_csv": "trajectory.csv"}}
-    (out / "result.json").write_text(json.dumps(summary, indent=2))
-    print(f"per-frame GS PnP: {summary['frames_used']} poses, rms {rms:.3f} px")
-    print(f"results: {out / 'result.json'}")
-    return EXIT_OK
+    return EXIT_OK if run.determined else EXIT_UNDETERMINED
 
 
 def run_localize(args) -> int:
-    from ..io.cameras import load_camera
-    from ..linedelay.report import plot_trajectory, write_trajectory_csv
-    from ..linedelay.spline import localize
+    from ..linedelay.pipeline import localize_video
+    from ..linedelay.report import write_video_outputs
 
-    _check_paths(args)
-    camera_file = load_camera(args.camera)
-    camera = camera_file.camera
-    line_delay = args.line_delay if args.line_delay is not None else camera_file.line_delay_s
-    if line_delay is not None and not math.isfinite(line_delay):
-        raise InputError("--line-delay must be a finite number")
-    if args.model == "gs-pnp":
-        return _run_localize_gs_pnp(args, camera, line_delay)
-    if line_delay is None:
-        raise InputError("no line delay: pass --line-delay (s/row) or a camera file that has one")
-    detection = _detect(args, camera)
-    result = localize(detection.observations, camera, args.rows, line_delay_s=line_delay,
-                      pixel_sigma=args.pixel_sigma, robust_loss=args.robust, progress=_progress(args))
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_trajectory_csv(result, out / "trajectory.csv")
-    plot_trajectory(result, out / "trajectory.png")
-    comparison = compare_with_pnp(result, camera)
-    summary = result.summary_dict() | {"trajectory_model": "rs-spline", "frames_total": detection.frames_total,
-                                       "gs_pnp_comparison": comparison}
-    summary.pop("line_delay_std_s", None)
-    (out / "result.json").write_text(json.dumps(summary, indent=2))
-    print(f"continuous-time RS trajectory: rms {result.rms_px:.3f} px over {result.observations} points; "
-          f"per-frame GS PnP: rms {comparison['gs_pnp_rms_px']:.3f} px; "
-          f"mean RS-vs-GS camera-centre difference {comparison['mean_centre_difference_m'] * 1e3:.2f} mm")
-    print(f"results: {out / 'result.json'}")
+    _check_flags(args)
+    run = localize_video(args.video, args.target, args.camera, model=args.model, line_delay_s=args.line_delay,
+                         **_common_options(args, ""))
+    summary = write_video_outputs(run, args.out)
+    result = run.result
+    if run.model == "gs-pnp":
+        print(f"per-frame GS PnP: {result.frames_used} poses, rms {result.rms_px:.3f} px")
+    else:
+        comparison = run.comparison
+        print(f"continuous-time RS trajectory: rms {result.rms_px:.3f} px over {result.observations} points; "
+              f"per-frame GS PnP: rms {comparison['gs_pnp_rms_px']:.3f} px; "
+              f"mean RS-vs-GS camera-centre difference {comparison['mean_centre_difference_m'] * 1e3:.2f} mm")
+    _print_warnings(summary)
+    print(f"results: {Path(args.out) / 'result.json'}")
     return EXIT_OK
-
-
-def compare_with_pnp(result, camera) -> dict:
-    """Reprojection RMS of the per-frame GS PnP poses vs the RS trajectory, and how far the
-    camera centres of the two differ at the frames' mid-readout times."""
-    from .. import _core
-
-    poses = result.frame_poses
-    obs = result.used_observations
-    t_mid = np.clip(obs.frame_times_s + 0.5 * result.readout_time_s, result.trajectory.t_begin,
-                    result.trajectory.t_end)
-    rotations, translations = _core.poses_at(result.trajectory, t_mid)
-    centre_rs = -np.einsum("nji,nj->ni", rotations, translations)
-    r_gs = np.stack([_core.rotation_vector_to_matrix(v) for v in poses.rotation_vector])
-    centre_gs = -np.einsum("nji,nj->ni", r_gs, poses.translation)
-    diff = np.linalg.norm(centre_rs - centre_gs, axis=1)
-    return {"gs_pnp_rms_px": float(np.sqrt(np.nanmean(poses.rms_px ** 2))), "rs_rms_px": result.rms_px,
-            "mean_centre_difference_m": float(np.mean(diff)), "max_centre_difference_m": float(np.max(diff))}

@@ -2,12 +2,15 @@
 baseline it is compared against (paper §4.1 and Fig. 5)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Optional
 
 import cv2
 import numpy as np
 
+from .. import _core
 from .._core import CameraModel
+from ..errors import InputError
 from ..observations import Observations
 
 
@@ -60,3 +63,68 @@ def per_frame_pnp(observations: Observations, camera: CameraModel, min_points: i
         tvecs[frame] = tvec.ravel()
         rms[frame] = float(np.sqrt(np.nanmean((uv - observations.uv[rows]) ** 2)))
     return FramePoses(ok, rvecs, tvecs, rms)
+
+
+@dataclass
+class PnpTrajectory:
+    """Per-frame GS PnP poses as a trajectory (`rscalib localize --model gs-pnp`): each pose is stamped
+    at its frame's mid-readout time t_i + rows d / 2 (the time a global-shutter fit of a rolling-shutter
+    frame best represents), or at t_i when no line delay is known.
+
+    times_s: (F,) of the frames with a pose; states: (F, 6) T_cw [p; phi], rotation vectors unwrapped
+    (paper eq. 22) as the spline's state."""
+
+    times_s: np.ndarray
+    states: np.ndarray
+    frames_total: int
+    frames_used: int
+    observations: int                 # target points in the frames with a pose
+    rms_px: float
+    line_delay_s: Optional[float]
+    readout_time_s: float             # rows d (0 without a line delay)
+    warnings: list[str] = field(default_factory=list)
+    trajectory_model: str = "gs-pnp"
+
+    def summary_dict(self) -> dict:
+        """JSON-ready fields, the keys of the other line-delay results where they apply."""
+        known = self.line_delay_s is not None and self.line_delay_s != 0
+        return {"trajectory_model": self.trajectory_model, "frames_total": self.frames_total,
+                "frames_used": self.frames_used, "observations": self.observations, "rms_px": self.rms_px,
+                "line_delay_s": self.line_delay_s, "readout_time_s": self.readout_time_s if known else None,
+                "time_reference": "mid-readout" if known else "row 0 (no line delay given)",
+                "warnings": list(self.warnings)}
+
+
+def pnp_trajectory(observations: Observations, camera: CameraModel, rows: Optional[int] = None,
+                   line_delay_s: Optional[float] = None) -> PnpTrajectory:
+    """The per-frame GS PnP baseline as a trajectory (see PnpTrajectory); rows: read out
+    (default: image height). InputError when no frame has a pose."""
+    rows = rows if rows is not None else observations.image_size[1]
+    poses = per_frame_pnp(observations, camera)
+    if np.count_nonzero(poses.ok) == 0:
+        raise InputError("no frame has enough target points for a PnP pose")
+    readout_s = (line_delay_s or 0.0) * rows
+    times = observations.frame_times_s[poses.ok] + 0.5 * readout_s
+    states = np.c_[poses.translation[poses.ok], _core.unwrap_rotation_vectors(poses.rotation_vector[poses.ok])]
+    points = np.bincount(observations.frame_index, minlength=observations.num_frames)[poses.ok]
+    return PnpTrajectory(times_s=times, states=states, frames_total=observations.num_frames,
+                         frames_used=int(np.count_nonzero(poses.ok)), observations=int(np.sum(points)),
+                         rms_px=float(np.sqrt(np.nanmean(poses.rms_px[poses.ok] ** 2))),
+                         line_delay_s=line_delay_s, readout_time_s=readout_s)
+
+
+def compare_with_pnp(result, camera: CameraModel) -> dict:
+    """How a continuous-time result (rscalib.localize / calibrate_line_delay) compares with the
+    per-frame GS PnP poses it started from (paper Fig. 5): the reprojection RMS of both, and how
+    far their camera centres differ at the frames' mid-readout times."""
+    poses = result.frame_poses
+    obs = result.used_observations
+    t_mid = np.clip(obs.frame_times_s + 0.5 * result.readout_time_s, result.trajectory.t_begin,
+                    result.trajectory.t_end)
+    rotations, translations = _core.poses_at(result.trajectory, t_mid)
+    centre_rs = -np.einsum("nji,nj->ni", rotations, translations)
+    r_gs = np.stack([_core.rotation_vector_to_matrix(v) for v in poses.rotation_vector])
+    centre_gs = -np.einsum("nji,nj->ni", r_gs, poses.translation)
+    diff = np.linalg.norm(centre_rs - centre_gs, axis=1)
+    return {"gs_pnp_rms_px": float(np.sqrt(np.nanmean(poses.rms_px ** 2))), "rs_rms_px": result.rms_px,
+            "mean_centre_difference_m": float(np.mean(diff)), "max_centre_difference_m": float(np.max(diff))}

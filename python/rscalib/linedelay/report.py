@@ -1,14 +1,20 @@
-"""Outputs of `rscalib linedelay` / `localize`: result.json, trajectory CSV, plots, a
-self-contained report.html with a verdict, and camera files for other tools (SPEC §5)."""
+"""Outputs of every line-delay result: result.json (through rscalib.io.results), trajectory.csv,
+plots, a self-contained report.html with a verdict, and camera files for other tools (through
+rscalib.io.cameras.write_camera_set).
+
+- `rscalib linedelay` (spline, linear): write_outputs -- everything above;
+- `rscalib localize --model rs-spline`: write_localize_outputs -- result.json, trajectory.csv/.png;
+- `rscalib localize --model gs-pnp`: write_pnp_outputs -- result.json, trajectory.csv;
+- a video run of linedelay/pipeline.py: write_video_outputs picks the one of its model.
+"""
 from __future__ import annotations
 
 import base64
 import html
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional, Union
 
 import matplotlib
 
@@ -20,7 +26,17 @@ from matplotlib.patches import Ellipse  # noqa: E402
 from .. import _core  # noqa: E402
 from .._core import CameraModel  # noqa: E402
 from ..io.cameras import write_camera_set  # noqa: E402
+from ..io.results import write_result_json  # noqa: E402
+from .linear import LinearInterpResult  # noqa: E402
+from .pnp import PnpTrajectory  # noqa: E402
 from .spline import LineDelayResult  # noqa: E402
+
+if TYPE_CHECKING:
+    from .pipeline import VideoResult
+
+# the results write_outputs takes: the line delay estimated with either trajectory model
+Estimate = Union[LineDelayResult, LinearInterpResult]
+TRAJECTORY_HEADER = "t_s,p_x_m,p_y_m,p_z_m,phi_x_rad,phi_y_rad,phi_z_rad"
 
 
 @dataclass
@@ -33,7 +49,10 @@ class Verdict:
 def image_velocity(result: LineDelayResult, camera: CameraModel, times_s: np.ndarray, points_w: np.ndarray,
                    h_s: float = 1e-4) -> np.ndarray:
     """(u_dot, v_dot) in px/s of each point at its time, by central differences of the
-    projection through the estimated trajectory."""
+    projection through the estimated trajectory.
+
+    The solver computes these velocities too (for the noise map A, paper eq. 15-21), but
+    `_core.RsSolveSummary` does not expose them, so the plots recompute them here."""
     traj = result.trajectory
     t = np.clip(times_s, traj.t_begin + h_s, traj.t_end - h_s)
     uv = []
@@ -44,7 +63,12 @@ def image_velocity(result: LineDelayResult, camera: CameraModel, times_s: np.nda
     return (uv[1] - uv[0]) / (2 * h_s)
 
 
-def verdict(result: LineDelayResult) -> Verdict:
+def observation_velocity(result: LineDelayResult, camera: CameraModel) -> np.ndarray:
+    """(M, 2) image velocity of every used observation at its time t_i + v d."""
+    return image_velocity(result, camera, result.observation_time_s, result.used_observations.points_w())
+
+
+def verdict(result: Estimate) -> Verdict:
     reasons = []
     if not result.determined:
         reasons.append("the data do not determine the line delay (too little motion)")
@@ -70,6 +94,42 @@ def verdict(result: LineDelayResult) -> Verdict:
     return Verdict(trust, reasons, headline)
 
 
+# ------------------------------------------------------------------------------- trajectories
+
+def _time_origin(result: Estimate) -> float:
+    """t = 0 of the plots: the spline's first knot, the linear model's first frame."""
+    if isinstance(result, LinearInterpResult):
+        return float(result.frame_times_s[0])
+    return result.trajectory.t_begin
+
+
+def trajectory_samples(result: Union[Estimate, PnpTrajectory]) -> tuple[np.ndarray, np.ndarray]:
+    """(times, (n, 6) states T_cw [p; phi]) of trajectory.csv: for the continuous-time models, every
+    used frame's row-0 and mid-readout time (inside the spline's domain); for per-frame PnP, its poses."""
+    if isinstance(result, PnpTrajectory):
+        return result.times_s, result.states
+    frame_times = result.used_observations.frame_times_s
+    times = np.sort(np.concatenate([frame_times, frame_times + 0.5 * result.readout_time_s]))
+    if isinstance(result, LinearInterpResult):
+        return times, result.evaluate(times)
+    times = times[(times >= result.trajectory.t_begin) & (times <= result.trajectory.t_end)]
+    return times, result.trajectory.evaluate(times)
+
+
+def write_states_csv(path: Path, times, states) -> Path:
+    """The trajectory CSV: t_s, p (3), phi (3); rows without a pose (NaN) are left out."""
+    states = np.asarray(states)
+    ok = np.all(np.isfinite(states), axis=1)
+    np.savetxt(path, np.c_[np.asarray(times)[ok], states[ok]], delimiter=",", header=TRAJECTORY_HEADER,
+               comments="", fmt="%.9f")
+    return Path(path)
+
+
+def write_trajectory_csv(result: Union[Estimate, PnpTrajectory], path: Path) -> Path:
+    """T_cw of any line-delay result at the times of trajectory_samples: t_s, p (3), φ (3)."""
+    return write_states_csv(path, *trajectory_samples(result))
+
+
 # ------------------------------------------------------------------------------------- plots
 
 def _save(fig, path: Path) -> Path:
@@ -79,9 +139,9 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def plot_residuals_time(result: LineDelayResult, path: Path) -> Path:
+def plot_residuals_time(result: Estimate, path: Path) -> Path:
     fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
-    t = result.observation_time_s - result.trajectory.t_begin
+    t = result.observation_time_s - _time_origin(result)
     for ax, k, name in ((axes[0], 0, "u"), (axes[1], 1, "v")):
         ax.plot(t, result.residual_px[:, k], ".", ms=1.5, alpha=0.4)
         ax.axhline(0, color="k", lw=0.6)
@@ -93,7 +153,7 @@ def plot_residuals_time(result: LineDelayResult, path: Path) -> Path:
     return _save(fig, path)
 
 
-def plot_residuals_image(result: LineDelayResult, path: Path) -> Path:
+def plot_residuals_image(result: Estimate, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(7, 5.5))
     uv = result.used_observations.uv
     mag = np.linalg.norm(result.residual_px, axis=1)
@@ -109,11 +169,13 @@ def plot_residuals_image(result: LineDelayResult, path: Path) -> Path:
     return _save(fig, path)
 
 
-def plot_covariance_ellipses(result: LineDelayResult, camera: CameraModel, path: Path, count: int = 6) -> Path:
+def plot_covariance_ellipses(result: LineDelayResult, camera: CameraModel, path: Path, count: int = 6,
+                             velocity: Optional[np.ndarray] = None) -> Path:
     """Paper Fig. 2: error covariance A R A^T (red) against R (grey) at a few observations
-    with fast image motion, drawn at their image position and magnified."""
+    with fast image motion, drawn at their image position and magnified. velocity: the
+    observations' image velocities (default: observation_velocity)."""
     obs = result.used_observations
-    velocity = image_velocity(result, camera, result.observation_time_s, obs.points_w())
+    velocity = observation_velocity(result, camera) if velocity is None else velocity
     speed = np.linalg.norm(velocity, axis=1)
     picks = np.argsort(speed)[::-1][: max(1, len(speed) // 50)]
     picks = picks[np.linspace(0, len(picks) - 1, min(count, len(picks))).astype(int)]
@@ -137,9 +199,10 @@ def plot_covariance_ellipses(result: LineDelayResult, camera: CameraModel, path:
     return _save(fig, path)
 
 
-def plot_knots_and_speed(result: LineDelayResult, camera: CameraModel, path: Path) -> Path:
+def plot_knots_and_speed(result: LineDelayResult, camera: CameraModel, path: Path,
+                         velocity: Optional[np.ndarray] = None) -> Path:
     obs = result.used_observations
-    velocity = image_velocity(result, camera, result.observation_time_s, obs.points_w())
+    velocity = observation_velocity(result, camera) if velocity is None else velocity
     speed = np.linalg.norm(velocity, axis=1)
     t0 = result.trajectory.t_begin
     knots = result.knots - t0
@@ -177,44 +240,64 @@ def plot_rounds(result: LineDelayResult, path: Path) -> Path:
     return _save(fig, path)
 
 
-def plot_trajectory(result: LineDelayResult, path: Path) -> Path:
-    traj = result.trajectory
-    t = np.linspace(traj.t_begin, traj.t_end, 2000)
-    x = traj.evaluate(t)
-    poses = result.frame_poses
+def plot_trajectory(result: Estimate, path: Path) -> Path:
+    """The estimated T_cw(t) (lines) against the per-frame GS PnP poses it started from (dots)."""
+    t0 = _time_origin(result)
+    if isinstance(result, LinearInterpResult):
+        t = np.linspace(result.frame_times_s[0], result.frame_times_s[-1], 2000)
+        x = result.evaluate(t)
+        poses, model = result.gs_poses, "linear / SLERP between frames"
+    else:
+        t = np.linspace(result.trajectory.t_begin, result.trajectory.t_end, 2000)
+        x = result.trajectory.evaluate(t)
+        poses, model = result.frame_poses, "spline"
     frame_t = result.used_observations.frame_times_s
     rot = _core.unwrap_rotation_vectors(poses.rotation_vector)
     fig, axes = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
     for k, name in enumerate("xyz"):
-        axes[0].plot(t - traj.t_begin, x[:, k], lw=1, label=f"p_{name}")
-        axes[0].plot(frame_t - traj.t_begin, poses.translation[:, k], ".", ms=2, color=f"C{k}")
-        axes[1].plot(t - traj.t_begin, x[:, 3 + k], lw=1, label=f"φ_{name}")
-        axes[1].plot(frame_t - traj.t_begin, rot[:, k], ".", ms=2, color=f"C{k}")
+        axes[0].plot(t - t0, x[:, k], lw=1, label=f"p_{name}")
+        axes[0].plot(frame_t - t0, poses.translation[:, k], ".", ms=2, color=f"C{k}")
+        axes[1].plot(t - t0, x[:, 3 + k], lw=1, label=f"φ_{name}")
+        axes[1].plot(frame_t - t0, rot[:, k], ".", ms=2, color=f"C{k}")
     axes[0].set_ylabel("translation p (m)")
     axes[1].set_ylabel("rotation vector φ (rad)")
     axes[1].set_xlabel("time (s)")
     axes[0].legend(ncol=3, fontsize=8)
     axes[1].legend(ncol=3, fontsize=8)
-    axes[0].set_title("Trajectory T_cw(t): spline (lines) and per-frame GS PnP (dots)")
+    axes[0].set_title(f"Trajectory T_cw(t): {model} (lines) and per-frame GS PnP (dots)")
     return _save(fig, path)
+
+
+def _plots(result: Estimate, camera: CameraModel, out: Path) -> dict:
+    """The report's plots of a line-delay estimate, {caption: path}: residuals and trajectory for
+    both models; the spline's error ellipses, knot density and rounds besides (the linear model has
+    no knots, no rounds and, by default, unstandardised errors)."""
+    plots = {
+        "residuals over time": plot_residuals_time(result, out / "residuals_time.png"),
+        "residuals over the image and target coverage": plot_residuals_image(result, out / "residuals_image.png"),
+    }
+    if isinstance(result, LineDelayResult):
+        velocity = observation_velocity(result, camera)
+        plots |= {
+            "error covariance ellipses (paper Fig. 2)": plot_covariance_ellipses(
+                result, camera, out / "covariance_ellipses.png", velocity=velocity),
+            "knot density and image motion": plot_knots_and_speed(result, camera, out / "knots_speed.png",
+                                                                  velocity=velocity),
+            "line delay per knot-adaptation round": plot_rounds(result, out / "rounds.png"),
+        }
+    plots["trajectory"] = plot_trajectory(result, out / "trajectory.png")
+    return plots
 
 
 # ---------------------------------------------------------------------------------- writers
 
-def write_trajectory_csv(result: LineDelayResult, path: Path) -> Path:
-    """T_cw at every used frame's row-0 time and mid-readout time: t_s, p (3), φ (3)."""
-    times = np.sort(np.concatenate([result.used_observations.frame_times_s,
-                                    result.used_observations.frame_times_s + 0.5 * result.readout_time_s]))
-    times = times[(times >= result.trajectory.t_begin) & (times <= result.trajectory.t_end)]
-    x = result.trajectory.evaluate(times)
-    header = "t_s,p_x_m,p_y_m,p_z_m,phi_x_rad,phi_y_rad,phi_z_rad"
-    np.savetxt(path, np.c_[times, x], delimiter=",", header=header, comments="", fmt="%.9f")
-    return path
-
-
-def write_outputs(result: LineDelayResult, camera: CameraModel, out_dir, *, frames_total: Optional[int] = None,
-                  extra: Optional[dict] = None, fps: float = 0.0, title: str = "rscalib linedelay") -> dict:
-    """Writes everything into out_dir; returns the result.json dict."""
+def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_total: Optional[int] = None,
+                  extra: Optional[dict] = None, fps: float = 0.0, title: Optional[str] = None,
+                  command: str = "linedelay", inputs: Optional[dict] = None) -> dict:
+    """Everything of a line-delay estimate (spline or linear model) into out_dir: result.json,
+    trajectory.csv, the camera files, the plots and report.html. Returns the result.json dict
+    (without its provenance). frames_total: frames read (default: the result's); extra: more
+    result.json fields; fps: for the Gyroflow profile; command, inputs: the provenance."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary = result.summary_dict()
@@ -229,21 +312,63 @@ def write_outputs(result: LineDelayResult, camera: CameraModel, out_dir, *, fram
     camera_files, camera_warnings = write_camera_set(camera, out, result.line_delay_s, fps=fps, rms_px=result.rms_px)
     files |= camera_files
     warnings += camera_warnings
-    plots = {
-        "residuals over time": plot_residuals_time(result, out / "residuals_time.png"),
-        "residuals over the image and target coverage": plot_residuals_image(result, out / "residuals_image.png"),
-        "error covariance ellipses (paper Fig. 2)": plot_covariance_ellipses(result, camera, out / "covariance_ellipses.png"),
-        "knot density and image motion": plot_knots_and_speed(result, camera, out / "knots_speed.png"),
-        "line delay per knot-adaptation round": plot_rounds(result, out / "rounds.png"),
-        "trajectory": plot_trajectory(result, out / "trajectory.png"),
-    }
+    plots = _plots(result, camera, out)
     files["plots"] = [p.name for p in plots.values()]
     files["report"] = "report.html"
     summary["warnings"] = warnings
     summary["files"] = files
-    (out / "result.json").write_text(json.dumps(summary, indent=2))
+    write_result_json(out, summary, command=command, inputs=inputs)
+    if title is None:
+        title = "rscalib linedelay" + (" --trajectory linear" if isinstance(result, LinearInterpResult) else "")
     _write_html(out / "report.html", title, summary, v, plots)
     return summary
+
+
+def write_localize_outputs(result: LineDelayResult, out_dir, *, comparison: Optional[dict] = None,
+                           frames_total: Optional[int] = None, extra: Optional[dict] = None,
+                           command: str = "localize", inputs: Optional[dict] = None) -> dict:
+    """A trajectory with a known line delay (rscalib.localize) into out_dir: result.json (with the
+    comparison against per-frame GS PnP, linedelay.pnp.compare_with_pnp), trajectory.csv and
+    trajectory.png. Returns the result.json dict."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = result.summary_dict() | {"trajectory_model": "rs-spline", "gs_pnp_comparison": comparison}
+    summary.pop("line_delay_std_s", None)  # d was given, not estimated
+    if frames_total is not None:
+        summary["frames_total"] = int(frames_total)
+    summary.update(extra or {})
+    summary["files"] = {"trajectory_csv": write_trajectory_csv(result, out / "trajectory.csv").name,
+                        "plots": [plot_trajectory(result, out / "trajectory.png").name]}
+    write_result_json(out, summary, command=command, inputs=inputs)
+    return summary
+
+
+def write_pnp_outputs(trajectory: PnpTrajectory, out_dir, *, frames_total: Optional[int] = None,
+                      extra: Optional[dict] = None, command: str = "localize",
+                      inputs: Optional[dict] = None) -> dict:
+    """Per-frame GS PnP poses (linedelay.pnp.pnp_trajectory) into out_dir: result.json and a
+    trajectory.csv in the format of the other models. Returns the result.json dict."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = trajectory.summary_dict()
+    if frames_total is not None:
+        summary["frames_total"] = int(frames_total)
+    summary.update(extra or {})
+    summary["files"] = {"trajectory_csv": write_trajectory_csv(trajectory, out / "trajectory.csv").name}
+    write_result_json(out, summary, command=command, inputs=inputs)
+    return summary
+
+
+def write_video_outputs(run: VideoResult, out_dir, command: Optional[str] = None) -> dict:
+    """The outputs of a linedelay/pipeline.py run, by its model; returns the result.json dict.
+    command: the provenance's command (default: `linedelay` or `localize`, by the model)."""
+    common = dict(frames_total=run.detection.frames_total, extra=run.summary_extra(), inputs=run.inputs,
+                  command=command or run.command)
+    if run.model == "rs-spline":
+        return write_localize_outputs(run.result, out_dir, comparison=run.comparison, **common)
+    if run.model == "gs-pnp":
+        return write_pnp_outputs(run.result, out_dir, **common)
+    return write_outputs(run.result, run.camera, out_dir, fps=run.fps, **common)
 
 
 def _img(path: Path) -> str:
@@ -251,22 +376,39 @@ def _img(path: Path) -> str:
     return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.stem)}">'
 
 
-def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict) -> None:
-    rows = [("line delay", f"{summary['line_delay_s'] * 1e6:.4f} µs/row"),
-            ("standard deviation", "—" if summary["line_delay_std_s"] is None else f"{summary['line_delay_std_s'] * 1e6:.4f} µs/row"),
+# result.json "files" roles listed at the foot of report.html, with what reads them
+_FILE_NOTES = (("trajectory_csv", ""), ("opencv_yaml", " (OpenCV)"), ("kalibr_camchain", " (Kalibr)"),
+               ("gyroflow_profile", " (Gyroflow)"))
+
+
+def _table_rows(summary: dict) -> list[tuple[str, object]]:
+    std = summary["line_delay_std_s"]
+    if summary.get("trajectory_model") == "linear":
+        size = ("frame poses / interpolated intervals / chains",
+                f"{summary['knots']} / {summary['segments']} / {summary['chains']}")
+    else:
+        size = ("knot segments", summary["segments"])
+    return [("line delay", f"{summary['line_delay_s'] * 1e6:.4f} µs/row"),
+            ("standard deviation", "—" if std is None else f"{std * 1e6:.4f} µs/row"),
             ("readout time", f"{summary['readout_time_s'] * 1e3:.4f} ms ({summary['rows']} rows)"),
             ("frames used / total", f"{summary['frames_used']} / {summary['frames_total']}"),
             ("observations", summary["observations"]),
-            ("knot segments", summary["segments"]),
+            size,
             ("rms residual", f"{summary['rms_px']:.4f} px"),
             ("pixel sigma", f"{summary['pixel_sigma']:.4f} px ({summary['pixel_sigma_source']})"),
             ("normalised cost J/2N", f"{summary['normalised_cost']:.4f}"),
             ("converged", summary["converged"]),
             ("solve time", f"{summary['solve_time_s']:.2f} s")]
-    table = "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(val))}</td></tr>" for k, val in rows)
+
+
+def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict) -> None:
+    table = "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(val))}</td></tr>"
+                    for k, val in _table_rows(summary))
     reasons = "".join(f"<li>{html.escape(r)}</li>" for r in v.reasons)
     warnings = "".join(f"<li>{html.escape(w)}</li>" for w in summary["warnings"])
     figures = "".join(f"<figure>{_img(p)}<figcaption>{html.escape(name)}</figcaption></figure>" for name, p in plots.items())
+    files = ", ".join(["result.json"] + [summary["files"][role] + note for role, note in _FILE_NOTES
+                                         if role in summary["files"]])
     color = "#1a7f37" if v.trust else "#b35900"
     path.write_text(f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}}
@@ -278,6 +420,5 @@ figure{{margin:1.5em 0}}img{{max-width:100%}}figcaption{{color:#555;font-size:90
 <h2>Result</h2><table>{table}</table>
 {'<h2>Warnings</h2><ul>' + warnings + '</ul>' if warnings else ''}
 <h2>Plots</h2>{figures}
-<p>Files: result.json, trajectory.csv, camera_with_line_delay.yaml (OpenCV), camchain.yaml (Kalibr),
-gyroflow_lens_profile.json. Conventions: row 0 of a frame is exposed at its timestamp, row v at t + v·d.</p>
+<p>Files: {html.escape(files)}. Conventions: row 0 of a frame is exposed at its timestamp, row v at t + v·d.</p>
 </body></html>""")

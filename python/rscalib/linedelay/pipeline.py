@@ -1,0 +1,199 @@
+"""Video -> line-delay result: the one path of `rscalib linedelay` and `rscalib localize`, and of the
+experiments in benchmarks/ (their `_exp_common.detect` is `detect` here).
+
+    check the input files -> load the camera (rscalib.io.cameras) and the target (rscalib.io.targets)
+    -> detect the target in every frame (rscalib.detection.pipeline.detect_video) -> check the sizes
+    -> estimate the line delay with the chosen trajectory model (calibrate_video: spline, linear)
+       or, with a known line delay, the trajectory (localize_video: rs-spline, gs-pnp)
+    -> VideoResult, whose outputs linedelay/report.py writes (write_video_outputs).
+
+Never prints: detection progress goes through `progress` (rscalib._progress: True for a bar on
+stderr, or a callable (done, total)); `on_detection(detection)` is called once the detections are in,
+before the solve; `on_round(RoundRecord)` after each knot-adaptation round of the spline.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Optional, Union
+
+import numpy as np
+
+from .._core import CameraModel
+from .._progress import ProgressArg
+from ..detection.pipeline import detect_video
+from ..detection.result import DetectionResult
+from ..errors import InputError
+from ..io.cameras import load_camera
+from ..io.targets import Target, load_target
+from .linear import LinearInterpResult, calibrate_line_delay_linear
+from .pnp import PnpTrajectory, compare_with_pnp, pnp_trajectory
+from .spline import LineDelayResult, RoundRecord, calibrate_line_delay, localize
+
+TRAJECTORY_MODELS = ("spline", "linear")    # calibrate_video: `rscalib linedelay --trajectory`
+LOCALIZE_MODELS = ("rs-spline", "gs-pnp")   # localize_video: `rscalib localize --model`
+
+PathLike = Union[str, Path]
+DetectionCallback = Optional[Callable[[DetectionResult], None]]
+RoundCallback = Optional[Callable[[RoundRecord], None]]
+
+
+@dataclass
+class VideoResult:
+    """What calibrate_video and localize_video return: the engine's result with the detections and
+    the camera it came from.
+
+    model: "spline" | "linear" (the line delay estimated) or "rs-spline" | "gs-pnp" (a trajectory with
+    a known line delay); result: LineDelayResult (spline, rs-spline), LinearInterpResult (linear) or
+    PnpTrajectory (gs-pnp), its warnings led by the detection's; inputs: the video, target and camera
+    files; settings: the model's options as recorded in result.json; comparison: rs-spline only,
+    against per-frame GS PnP (pnp.compare_with_pnp)."""
+
+    model: str
+    result: Union[LineDelayResult, LinearInterpResult, PnpTrajectory]
+    camera: CameraModel
+    detection: DetectionResult
+    inputs: dict
+    settings: dict = field(default_factory=dict)
+    comparison: Optional[dict] = None
+
+    @property
+    def command(self) -> str:
+        """The subcommand this run is: `linedelay` (the line delay estimated) or `localize`."""
+        return "linedelay" if self.model in TRAJECTORY_MODELS else "localize"
+
+    @property
+    def determined(self) -> bool:
+        """False when the data do not determine the line delay (a localization always is)."""
+        return bool(getattr(self.result, "determined", True))
+
+    @property
+    def fps(self) -> float:
+        """Frames per second from the median interval of the detected frames (0 for one frame)."""
+        observations = self.detection.observations
+        if observations.num_frames < 2:
+            return 0.0
+        return float(1.0 / np.median(np.diff(observations.frame_times_s)))
+
+    def summary_extra(self) -> dict:
+        """The result.json fields of the video and its detection, then the model's settings."""
+        d = self.detection
+        return {"video": self.inputs["video"], "detection_dropped": d.dropped, "frames_detected": d.frames_detected,
+                "timestamps_from": d.timestamps, "detection_time_s": d.detect_time_s} | self.settings
+
+
+def check_files(video: PathLike, target: PathLike, camera: PathLike) -> None:
+    """InputError (one line) when the video, the target file or the camera file is missing."""
+    if not Path(video).exists():
+        raise InputError(f"video not found: {video}")
+    for name, path in (("target", target), ("camera", camera)):
+        if not Path(path).is_file():
+            raise InputError(f"{name} file not found: {path}")
+
+
+def detect(video: PathLike, target: Union[Target, PathLike], camera: CameraModel, *,
+           workers: Optional[int] = None, cache: bool = True, cache_dir: Optional[PathLike] = None,
+           progress: ProgressArg = False) -> DetectionResult:
+    """The target (a Target or its file) detected in every frame of the video (or image folder),
+    with detect_video's cache; InputError when it is detected nowhere or the video's size is not
+    the camera's."""
+    if not isinstance(target, Target):
+        target = load_target(target)
+    detection = detect_video(video, target, workers=workers, cache=cache, cache_dir=cache_dir, progress=progress)
+    if detection.observations.num_observations == 0:
+        raise InputError(f"the target was not detected in any of the {detection.frames_total} frames "
+                         "(wrong target file or size?)")
+    if tuple(detection.image_size) != (camera.width, camera.height):
+        raise InputError(f"the video is {detection.image_size[0]}x{detection.image_size[1]} but the camera file is "
+                         f"{camera.width}x{camera.height}")
+    return detection
+
+
+def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, model: str = "spline",
+                    rows: Optional[int] = None, pixel_sigma: Optional[float] = None, robust_loss: str = "none",
+                    max_rounds: int = 8, uniform_knots: Optional[int] = None, standardise_errors: bool = True,
+                    use_motion_prior: bool = True, workers: Optional[int] = None, cache: bool = True,
+                    cache_dir: Optional[PathLike] = None, progress: ProgressArg = False,
+                    on_detection: DetectionCallback = None, on_round: RoundCallback = None) -> VideoResult:
+    """The line delay of a video of a target (`rscalib linedelay`).
+
+    video: file or image folder; target, camera: their files (target YAML; OpenCV or Kalibr camera).
+    model: "spline" (calibrate_line_delay: the adaptive B-spline, Oth et al. 2013) or "linear"
+    (calibrate_line_delay_linear: per-frame poses, Hedborg et al. 2012). uniform_knots,
+    standardise_errors=False and use_motion_prior=False apply to the spline only. rows, pixel_sigma,
+    robust_loss, max_rounds: as the engines'. workers, cache, cache_dir: detection (detect_video)."""
+    if model not in TRAJECTORY_MODELS:
+        raise InputError(f"unknown trajectory model {model!r}; one of {', '.join(TRAJECTORY_MODELS)}")
+    check_files(video, target, camera)
+    if model == "linear":
+        spline_only = [name for name, used in (("uniform knots", uniform_knots is not None),
+                                               ("unstandardised errors", not standardise_errors),
+                                               ("no motion prior", not use_motion_prior)) if used]
+        if spline_only:
+            raise InputError(f"{', '.join(spline_only)}: only for the spline trajectory (the linear model has no "
+                             "knots, no motion prior and unstandardised errors)")
+    camera_model = load_camera(camera).camera
+    detection = _detections(video, target, camera_model, workers, cache, cache_dir, progress, on_detection)
+    observations = detection.observations
+    if model == "linear":
+        result = calibrate_line_delay_linear(observations, camera_model, rows, pixel_sigma=pixel_sigma,
+                                             robust_loss=robust_loss)
+        settings = {}
+    else:
+        knots = {} if uniform_knots is None else {"num_segments": uniform_knots, "adaptive_knots": False}
+        result = calibrate_line_delay(observations, camera_model, rows, pixel_sigma=pixel_sigma,
+                                      robust_loss=robust_loss, max_rounds=max_rounds,
+                                      standardise_errors=standardise_errors, use_motion_prior=use_motion_prior,
+                                      progress=on_round, **knots)
+        settings = {"trajectory_model": "spline", "standardise_errors": standardise_errors,
+                    "motion_prior": use_motion_prior, "adaptive_knots": uniform_knots is None}
+    result.warnings[:0] = list(detection.warnings)
+    return VideoResult(model, result, camera_model, detection, _inputs(video, target, camera), settings)
+
+
+def localize_video(video: PathLike, target: PathLike, camera: PathLike, *, model: str = "rs-spline",
+                   line_delay_s: Optional[float] = None, rows: Optional[int] = None,
+                   pixel_sigma: Optional[float] = None, robust_loss: str = "none", workers: Optional[int] = None,
+                   cache: bool = True, cache_dir: Optional[PathLike] = None, progress: ProgressArg = False,
+                   on_detection: DetectionCallback = None, on_round: RoundCallback = None) -> VideoResult:
+    """The camera trajectory of a video of a target with a known line delay (`rscalib localize`).
+
+    line_delay_s: s/row (default: the camera file's). model: "rs-spline" (spline.localize, the
+    continuous-time rolling-shutter trajectory, paper §5.1, compared with per-frame GS PnP) or
+    "gs-pnp" (pnp.pnp_trajectory: per-frame global-shutter poses at mid-readout; the line delay
+    may be unknown). Other arguments as calibrate_video's."""
+    if model not in LOCALIZE_MODELS:
+        raise InputError(f"unknown localization model {model!r}; one of {', '.join(LOCALIZE_MODELS)}")
+    check_files(video, target, camera)
+    camera_file = load_camera(camera)
+    camera_model = camera_file.camera
+    if line_delay_s is None:
+        line_delay_s = camera_file.line_delay_s
+    if line_delay_s is not None and not math.isfinite(line_delay_s):
+        raise InputError("the line delay must be a finite number")
+    if model == "rs-spline" and line_delay_s is None:
+        raise InputError("no line delay: pass one (--line-delay, s/row) or a camera file that has one")
+    detection = _detections(video, target, camera_model, workers, cache, cache_dir, progress, on_detection)
+    inputs = _inputs(video, target, camera)
+    if model == "gs-pnp":
+        poses = pnp_trajectory(detection.observations, camera_model, rows, line_delay_s)
+        poses.warnings[:0] = list(detection.warnings)
+        return VideoResult(model, poses, camera_model, detection, inputs)
+    result = localize(detection.observations, camera_model, rows, line_delay_s=line_delay_s,
+                      pixel_sigma=pixel_sigma, robust_loss=robust_loss, progress=on_round)
+    result.warnings[:0] = list(detection.warnings)
+    return VideoResult(model, result, camera_model, detection, inputs,
+                       comparison=compare_with_pnp(result, camera_model))
+
+
+def _detections(video, target, camera: CameraModel, workers, cache, cache_dir, progress,
+                on_detection: DetectionCallback) -> DetectionResult:
+    detection = detect(video, target, camera, workers=workers, cache=cache, cache_dir=cache_dir, progress=progress)
+    if on_detection is not None:
+        on_detection(detection)
+    return detection
+
+
+def _inputs(video, target, camera) -> dict:
+    return {"video": str(video), "target": str(target), "camera": str(camera)}

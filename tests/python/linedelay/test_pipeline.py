@@ -1,0 +1,105 @@
+"""linedelay/pipeline.py (video -> result, the path of the CLI and the experiments) and the writers
+of linedelay/report.py for every model."""
+import json
+
+import numpy as np
+import pytest
+
+from rscalib.errors import InputError
+from rscalib.io.cameras import load_camera, write_opencv_yaml
+from rscalib.linedelay import pipeline
+from rscalib.linedelay.pnp import PnpTrajectory
+from rscalib.linedelay.report import write_video_outputs
+from rscalib.linedelay.spline import calibrate_line_delay
+
+D_S = 40e-6
+
+
+@pytest.fixture(scope="module")
+def video(tmp_path_factory):
+    from rscalib.sim.target_video import render_video
+
+    out = tmp_path_factory.mktemp("pipeline_video")
+    render_video(out, line_delay_s=D_S, fps=30, size=(640, 480), target="checkerboard", duration_s=1.5,
+                 seed=3, supersample=1, progress=False)
+    return out
+
+
+def files(video):
+    return video / "video.avi", video / "target.yaml", video / "camera.yaml"
+
+
+def test_calibrate_video_is_detect_then_the_engine(video, tmp_path):
+    detected, rounds = [], []
+    run = pipeline.calibrate_video(*files(video), cache_dir=tmp_path / "cache", on_detection=detected.append,
+                                   on_round=rounds.append)
+    camera = load_camera(video / "camera.yaml").camera
+    detection = pipeline.detect(*files(video)[:2], camera, cache_dir=tmp_path / "cache")
+    direct = calibrate_line_delay(detection.observations, camera)
+    assert run.model == "spline" and run.command == "linedelay"
+    assert run.result.line_delay_s == direct.line_delay_s
+    assert run.result.line_delay_std_s == direct.line_delay_std_s
+    assert len(detected) == 1 and detected[0].frames_total == detection.frames_total
+    assert [r.round for r in rounds] == [h.round for h in run.result.history]
+    assert abs(run.result.line_delay_s - D_S) < 0.03 * D_S
+    assert run.fps == pytest.approx(30.0)
+    assert run.settings == {"trajectory_model": "spline", "standardise_errors": True, "motion_prior": True,
+                            "adaptive_knots": True}
+
+
+def test_linear_writes_a_report_through_the_same_writers(video, tmp_path):
+    run = pipeline.calibrate_video(*files(video), model="linear", cache_dir=tmp_path / "cache")
+    summary = write_video_outputs(run, tmp_path / "lin")
+    written = json.loads((tmp_path / "lin" / "result.json").read_text())
+    assert written["trajectory_model"] == "linear" and written["provenance"]["command"] == "linedelay"
+    assert written["provenance"]["inputs"]["video"] == str(video / "video.avi")
+    assert written["line_delay_s"] == summary["line_delay_s"] == run.result.line_delay_s
+    assert "verdict" in written and written["frames_total"] == run.detection.frames_total
+    assert written["files"]["plots"] == ["residuals_time.png", "residuals_image.png", "trajectory.png"]
+    html = (tmp_path / "lin" / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == 3
+    for name in ("trajectory.csv", "camera_with_line_delay.yaml", "camchain.yaml", "gyroflow_lens_profile.json"):
+        assert (tmp_path / "lin" / name).stat().st_size > 0
+
+
+def test_localize_rs_spline_and_gs_pnp(video, tmp_path):
+    rs = pipeline.localize_video(*files(video), line_delay_s=D_S, cache_dir=tmp_path / "cache")
+    assert rs.command == "localize" and rs.comparison["rs_rms_px"] == rs.result.rms_px
+    summary = write_video_outputs(rs, tmp_path / "rs")
+    assert summary["trajectory_model"] == "rs-spline" and "line_delay_std_s" not in summary
+    assert json.loads((tmp_path / "rs" / "result.json").read_text())["gs_pnp_comparison"] == rs.comparison
+    assert (tmp_path / "rs" / "trajectory.png").stat().st_size > 0
+
+    gs = pipeline.localize_video(*files(video), model="gs-pnp", line_delay_s=D_S, cache_dir=tmp_path / "cache")
+    assert isinstance(gs.result, PnpTrajectory)
+    write_video_outputs(gs, tmp_path / "gs")
+    table = np.loadtxt(tmp_path / "gs" / "trajectory.csv", delimiter=",", skiprows=1)
+    assert table.shape == (gs.result.frames_used, 7)
+    # mid-readout time stamps: row-0 times + rows d / 2
+    frame_times = gs.detection.observations.frame_times_s
+    assert table[0, 0] == pytest.approx(frame_times[0] + 0.5 * 480 * D_S)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"model": "bezier"}, "unknown trajectory model"),
+    ({"model": "linear", "uniform_knots": 5}, "only for the spline"),
+    ({"model": "linear", "use_motion_prior": False}, "only for the spline"),
+])
+def test_calibrate_video_rejects_bad_options_before_detecting(video, kwargs, message):
+    with pytest.raises(InputError, match=message):
+        pipeline.calibrate_video(*files(video), cache=False, **kwargs)
+
+
+def test_missing_files_and_missing_line_delay(video, tmp_path):
+    with pytest.raises(InputError, match="video not found"):
+        pipeline.calibrate_video(tmp_path / "nope.avi", *files(video)[1:])
+    with pytest.raises(InputError, match="camera file not found"):
+        pipeline.calibrate_video(*files(video)[:2], tmp_path / "nope.yaml")
+    no_delay = tmp_path / "camera.yaml"  # the rendered camera file carries the true line delay
+    write_opencv_yaml(load_camera(video / "camera.yaml").camera, no_delay)
+    with pytest.raises(InputError, match="no line delay"):
+        pipeline.localize_video(*files(video)[:2], no_delay, cache=False)
+    assert pipeline.localize_video(*files(video), cache=False).result.line_delay_s == \
+        load_camera(video / "camera.yaml").line_delay_s  # the camera file's line delay by default
+    with pytest.raises(InputError, match="finite"):
+        pipeline.localize_video(*files(video), line_delay_s=float("nan"), cache=False)
