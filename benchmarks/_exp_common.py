@@ -4,7 +4,7 @@ Rendered videos with exact ground truth go through the same code paths as the CL
 (`rscalib simulate` -> `rscalib linedelay` / `rscalib localize`):
 
     render_video -> video.avi, truth.json, camera.yaml, target.yaml
-    load_camera(camera.yaml), load_target(target.yaml), detect_video(video.avi)   (= linedelay._detect)
+    load_camera(camera.yaml), rscalib.linedelay.pipeline.detect(video.avi, target.yaml)   (as the CLI)
     calibrate_line_delay / localize
 
 Videos are cached under build/exp_videos/<config>/ (build/ is git-ignored); a video is re-rendered
@@ -192,20 +192,16 @@ def truth_trajectory(folder: Path):
 
 
 def detect(folder: Path, workers: Optional[int] = None):
-    """What `rscalib linedelay` does before solving (commands/linedelay.py _detect): camera and target
-    from the files written next to the video, detect_video with its cache."""
-    from rscalib.detection.pipeline import detect_video
+    """What `rscalib linedelay` does before solving (rscalib.linedelay.pipeline.detect): camera and
+    target from the files written next to the video, detect_video with its cache, the checks."""
     from rscalib.io.cameras import load_camera
-    from rscalib.io.targets import load_target
+    from rscalib.linedelay import pipeline
 
-    camera_file = load_camera(folder / "camera.yaml")
-    target = load_target(folder / "target.yaml")
+    camera = load_camera(folder / "camera.yaml").camera
     cache_dir = None if os.environ.get("RSCALIB_CACHE_DIR") else VIDEO_ROOT / "_detections"
-    detection = detect_video(folder / "video.avi", target, workers=workers, cache=True, cache_dir=cache_dir,
-                             progress=False)
-    if detection.observations.num_observations == 0:
-        raise RuntimeError(f"{folder}: target not detected")
-    return detection, camera_file.camera
+    detection = pipeline.detect(folder / "video.avi", folder / "target.yaml", camera, workers=workers,
+                                cache_dir=cache_dir)
+    return detection, camera
 
 
 # -- errors against the truth -----------------------------------------------------------------------
