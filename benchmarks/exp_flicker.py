@@ -6,7 +6,7 @@ flicker depth 0.3 with a random phase per seed. For each line delay d, light fre
 100 Hz mains) and camera (static, hand-held motion) over several seeds, the video goes through
 rscalib.flicker.estimate.estimate_line_delay_flicker (= `rscalib flicker`); both estimators are recorded
 when they apply (spectrum: >= 2 periods per frame; phase-drift: uses the frame timestamps). With
-motion, the 1 kHz video also goes through the target method (detect_video + calibrate_line_delay
+motion, the 1 kHz video also goes through the target method (rscalib.linedelay.pipeline.calibrate_video
 = `rscalib linedelay`).
 
 Usage: .venv/bin/python benchmarks/exp_flicker.py [--seeds 5] [--quick] [--no-linedelay]
@@ -42,14 +42,9 @@ RENDER = dict(fps=30.0, size=(640, 480), duration_s=1.0, noise=2.0, supersample=
 
 
 def target_estimate(video, camera_path, target_path) -> dict:
-    from rscalib.detection.pipeline import detect_video
-    from rscalib.io.cameras import load_camera
-    from rscalib.io.targets import load_target
-    from rscalib.linedelay.spline import calibrate_line_delay
+    from rscalib.linedelay.pipeline import calibrate_video
 
-    camera = load_camera(camera_path).camera
-    detection = detect_video(video, load_target(target_path), workers=1, cache=False, progress=False)
-    result = calibrate_line_delay(detection.observations, camera)
+    result = calibrate_video(video, target_path, camera_path, workers=1, cache=False).result
     return {"line_delay_s": result.line_delay_s, "line_delay_std_s": result.line_delay_std_s,
             "determined": bool(result.determined)}
 
