@@ -1,4 +1,4 @@
-"""Line-delay engine benchmarks (issue: RS engine; SPEC §6).
+"""Line-delay engine benchmarks (issue 3; docs/benchmarks.md: line-delay accuracy and speed).
 
 Accuracy: simulated 640x480, 30 fps, 15 s hand-held sequences, 0.3 px noise, 9x6 target, many
 seeds: median / 95th percentile of |relative error| of d, and the fraction with |err| <= 3 sigma_d.

@@ -1,4 +1,4 @@
-"""Detection noise from the data: the pixel sigma behind E[J] = 2N (SPEC §2, docs/formulation.md).
+"""Detection noise from the data: the pixel sigma behind E[J] = 2N (paper eq. 23, docs/formulation.md §8).
 
 Along a straight line of equally spaced target points, the projected image positions are a
 smooth function of the index (perspective, lens distortion and the rolling-shutter shift are

@@ -1,4 +1,4 @@
-"""End-to-end tests of the line-delay engine (SPEC §2) on simulated rolling-shutter video.
+"""End-to-end tests of the line-delay engine (Oth et al. 2013; docs/formulation.md) on simulated rolling-shutter video.
 
 Ground truth comes from rscalib.sim.target_observations (exact RS projections through OpenCV, independent of the
 C++ core): the true line delay, the true trajectory and the true detection noise. Each simulation
@@ -155,7 +155,7 @@ def test_knot_adaptation_puts_knots_where_motion_is_fast():
 
 
 # --------------------------------------------------------------------------------------------------
-# Continuous-time localisation (SPEC §2, paper §5.1)
+# Continuous-time localisation (Oth et al. 2013 §5.1)
 
 
 def test_localization_beats_global_shutter_pnp():
