@@ -20,11 +20,17 @@ in metres. Layouts:
   `markerLength` (metres), `dictionary` (an OpenCV name such as `DICT_5X5_100`), optional
   `legacyPattern` (boards made before OpenCV 4.6 with an even `squaresY`). Points are
   OpenCV's ChArUco corner ids, shifted so that corner 0 is the origin.
+
+Built-in targets (`Target.named`, `PRESET_TARGETS`, the names `rscalib simulate --target` takes):
+checkerboard, circlegrid, acircles, aprilgrid. This module holds a target's definition and
+geometry; `Target.draw` makes a printable image, and rscalib.sim.target_texture draws it for the
+renderer.
 """
 from __future__ import annotations
 
 import hashlib
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
@@ -40,11 +46,27 @@ TARGET_TYPES = ("checkerboard", "circlegrid", "aprilgrid", "charuco")
 # Kalibr draws its tags with a 2-bit black border (OpenCV's default is 1 bit).
 APRILGRID_BORDER_BITS = 2
 APRILGRID_DICTIONARY = "DICT_APRILTAG_36h11"
+APRILGRID_TAG_CELLS = 6 + 2 * APRILGRID_BORDER_BITS  # cells across a tag: 6x6 data inside the border
+
+# Built-in targets (Target.named): their Kalibr YAML fields.
+PRESET_TARGETS = {
+    "checkerboard": {"target_type": "checkerboard", "targetCols": 9, "targetRows": 6,
+                     "rowSpacingMeters": 0.04, "colSpacingMeters": 0.04},
+    "circlegrid": {"target_type": "circlegrid", "targetCols": 7, "targetRows": 5, "spacingMeters": 0.04,
+                   "asymmetricGrid": False},
+    "acircles": {"target_type": "circlegrid", "targetCols": 4, "targetRows": 11, "spacingMeters": 0.02,
+                 "asymmetricGrid": True},  # OpenCV's asymmetric 4x11 pattern
+    "aprilgrid": {"target_type": "aprilgrid", "tagCols": 6, "tagRows": 6, "tagSize": 0.088, "tagSpacing": 0.3},
+}
 
 
-@dataclass(frozen=True, eq=False)  # eq=False: compared and hashed by identity (it holds arrays)
+@dataclass(frozen=True, eq=False)  # eq=False: compared and hashed by the definition (__eq__, __hash__)
 class Target:
-    """A planar calibration target.
+    """A planar calibration target: its definition and the geometry that follows from it.
+
+    Build one with :func:`load_target` (a target YAML), :func:`target_from_dict`,
+    :meth:`Target.named` (a built-in target) or :func:`as_target` (any of these). How a target looks
+    when drawn is rscalib.sim.target_texture's business (and :meth:`draw`'s, for a printable image).
 
     target_type: one of TARGET_TYPES.
     spec: the defining fields, as in the YAML file (Kalibr names; see the module docstring).
@@ -61,9 +83,35 @@ class Target:
     grid_shape: Optional[tuple[int, int]]
     edge_pairs: np.ndarray = field(repr=False)
 
+    @classmethod
+    def named(cls, name: str) -> Target:
+        """A built-in target (:data:`PRESET_TARGETS`): checkerboard (9x6, 40 mm), circlegrid (7x5,
+        40 mm), acircles (OpenCV's asymmetric 4x11, 20 mm), aprilgrid (Kalibr's 6x6 tags of 88 mm,
+        spacing 0.3)."""
+        if name not in PRESET_TARGETS:
+            raise InputError(f"unknown target {name!r}: use {', '.join(PRESET_TARGETS)} or a Kalibr target YAML file")
+        return target_from_dict(PRESET_TARGETS[name])
+
+    def _key(self) -> tuple:
+        return (self.target_type, json.dumps(self.spec, sort_keys=True))
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Target) and self._key() == other._key()
+
+    def __hash__(self) -> int:
+        return hash(self._key())
+
     @property
     def num_points(self) -> int:
         return len(self.points_m)
+
+    def center_m(self) -> np.ndarray:
+        """(3,) centre of the points' bounding box."""
+        return 0.5 * (self.points_m.min(axis=0) + self.points_m.max(axis=0))
+
+    def kalibr_dict(self) -> dict:
+        """The target YAML's fields (Kalibr's names; ours for charuco)."""
+        return {"target_type": self.target_type, **self.spec}
 
     def fingerprint(self) -> str:
         """Stable hash of the definition (for detection caches)."""
@@ -94,6 +142,12 @@ class Target:
         base = (tag // tag_cols) * 2 * cols + 2 * (tag % tag_cols)
         return np.column_stack([base, base + 1, base + cols + 1, base + cols])
 
+    def aruco_corner_ids(self) -> np.ndarray:
+        """aprilgrid only: (tags, 4) point ids of cv2.aruco's marker corners (top-left, top-right,
+        bottom-right, bottom-left of the marker bitmap) as Kalibr prints the tags (the bitmap turned
+        by 180°, see :func:`aprilgrid_tag_cells`): Kalibr's corners 1, 0, 3, 2."""
+        return self.tag_corner_ids()[:, [1, 0, 3, 2]]
+
     def charuco_board(self):
         """charuco only: the cv2.aruco.CharucoBoard (square and marker lengths in metres)."""
         if self.target_type != "charuco":
@@ -105,6 +159,40 @@ class Target:
         target coordinates (x, y in metres) to its pixels. Used for synthetic tests and
         benchmarks; circles get a radius of 0.3 spacing (the YAML does not say)."""
         return _draw(self, float(pixels_per_metre), float(margin_m))
+
+
+def as_target(spec: Any) -> Target:
+    """A Target from a Target, a built-in name (:meth:`Target.named`) or a target YAML path."""
+    if isinstance(spec, Target):
+        return spec
+    text = str(spec)
+    if isinstance(spec, Path) or text.endswith((".yaml", ".yml")) or os.sep in text:
+        return load_target(text)
+    return Target.named(text)
+
+
+def aprilgrid_tag_cells(count: int) -> np.ndarray:
+    """(count, 10, 10) bool: the white cells of AprilGrid tags 0..count-1 as printed, indexed
+    ``[tag, j, i]`` with cell j along target +y and cell i along +x from the tag's corner 0.
+
+    The cv2.aruco 36h11 marker bitmap with Kalibr's 2-cell black border, turned by 180° as
+    kalibr_create_target_pdf prints its tags (its top row towards target +y). (Checked against a
+    real EuRoC AprilGrid frame: same border, same corner order.)
+    """
+    cells = _TAG_CELLS_CACHE.get(count)
+    if cells is None:
+        dictionary = _aruco_dictionary(APRILGRID_DICTIONARY)
+        # Turned by 180° and printed with +y up, the bitmap's row 0 lies along the tag's low-y side,
+        # mirrored in x: target cell (j, i) is bitmap pixel (j, n - 1 - i).
+        cells = np.stack([cv2.aruco.generateImageMarker(dictionary, k, APRILGRID_TAG_CELLS,
+                                                        borderBits=APRILGRID_BORDER_BITS)[:, ::-1] > 127
+                          for k in range(count)])
+        cells.setflags(write=False)
+        _TAG_CELLS_CACHE[count] = cells
+    return cells
+
+
+_TAG_CELLS_CACHE: dict = {}
 
 
 def load_target(path) -> Target:
@@ -301,7 +389,7 @@ def _draw(target: Target, ppm: float, margin_m: float) -> tuple[np.ndarray, np.n
     else:
         tag_cols, tag_rows = s["tagCols"], s["tagRows"]
         size, gap = s["tagSize"], s["tagSpacing"] * s["tagSize"]
-        bits = 6 + 2 * APRILGRID_BORDER_BITS
+        bits = APRILGRID_TAG_CELLS
 
         def edges(count: int) -> np.ndarray:
             # cells along an axis: margin, gap, tag 0's bits, gap, tag 1's bits, ..., gap, margin
@@ -324,15 +412,10 @@ def _draw(target: Target, ppm: float, margin_m: float) -> tuple[np.ndarray, np.n
         is_gap_x[[0, -1]] = is_gap_y[[0, -1]] = False  # margins
         values = np.full((len(tag_y), len(tag_x)), 255.0)
         values[np.ix_(is_gap_y, is_gap_x)] = 0.0  # Kalibr's small squares at the tag corners
-        dictionary = _aruco_dictionary(APRILGRID_DICTIONARY)
+        cells = aprilgrid_tag_cells(tag_rows * tag_cols)  # [tag, j along +y, i along +x]
         for tr in range(tag_rows):
             for tc in range(tag_cols):
-                marker = cv2.aruco.generateImageMarker(dictionary, tr * tag_cols + tc, bits,
-                                                       borderBits=APRILGRID_BORDER_BITS).astype(np.float64)
-                # In target coordinates (y up as printed) the bitmap's top-left lands on the tag's
-                # Kalibr corner 1 (x max, y min): with y increasing along the value rows, that is
-                # the bitmap flipped left-right.
-                values[np.ix_(tag_y == tr, tag_x == tc)] = marker[:, ::-1]
+                values[np.ix_(tag_y == tr, tag_x == tc)] = np.where(cells[tr * tag_cols + tc], 255.0, 0.0)
         flip_y = True
     lo = np.array([x_edges[0], y_edges[0]])
     hi = np.array([x_edges[-1], y_edges[-1]])

@@ -1,9 +1,12 @@
-"""Targets (rscalib.io.targets): Kalibr-style YAML, point layouts and ids, one-line errors, drawing."""
+"""Targets (rscalib.io.targets): Kalibr-style YAML, built-in targets, point layouts and ids, one-line errors,
+drawing."""
+import cv2
 import numpy as np
 import pytest
+import yaml
 
 from rscalib import InputError
-from rscalib.io.targets import load_target, target_from_dict
+from rscalib.io.targets import PRESET_TARGETS, Target, aprilgrid_tag_cells, as_target, load_target, target_from_dict
 
 CHECKERBOARD = {"target_type": "checkerboard", "targetCols": 9, "targetRows": 6,
                 "rowSpacingMeters": 0.03, "colSpacingMeters": 0.025}
@@ -165,3 +168,47 @@ def test_draw_maps_points_to_pixels(spec):
             assert _pixel(image, h, c2 - [d, d]) == 0
             assert _pixel(image, h, c2 + [d, d]) == 0
             assert _pixel(image, h, c2 + [d, -d]) == 255
+
+
+# ---------------------------------------------------------------------------------------------------
+# Built-in targets, one value per definition, AprilGrid tags as printed
+
+
+@pytest.mark.parametrize("name", sorted(PRESET_TARGETS))
+def test_named_targets_are_their_kalibr_fields(name, tmp_path):
+    t = Target.named(name)
+    assert t == target_from_dict(PRESET_TARGETS[name]) and t.kalibr_dict() == PRESET_TARGETS[name]
+    assert hash(t) == hash(Target.named(name)) and len({t, Target.named(name)}) == 1
+    path = write(tmp_path, yaml.safe_dump(t.kalibr_dict(), sort_keys=False))
+    assert load_target(path) == t and as_target(path) == t and as_target(str(path)) == t
+    assert as_target(name) == t and as_target(t) is t
+    np.testing.assert_allclose(t.center_m(), 0.5 * (t.points_m.min(0) + t.points_m.max(0)))
+
+
+def test_named_target_errors_and_values():
+    with pytest.raises(InputError, match="unknown target 'hexagons'"):
+        as_target("hexagons")
+    board = Target.named("checkerboard")
+    assert (board.grid_shape, board.spec["colSpacingMeters"]) == ((6, 9), 0.04)
+    assert Target.named("acircles").spec["asymmetricGrid"] and Target.named("acircles").grid_shape == (11, 4)
+    assert Target.named("aprilgrid").num_points == 4 * 36
+    assert board != target_from_dict({**PRESET_TARGETS["checkerboard"], "rowSpacingMeters": 0.03})
+
+
+def test_aprilgrid_drawing_decodes_with_the_aruco_corner_ids():
+    """The printed tags (aprilgrid_tag_cells, used by draw() and the renderer's texture) decode with
+    cv2.aruco to their own ids, each marker corner on the point aruco_corner_ids() names."""
+    t = target_from_dict({**APRILGRID, "tagCols": 3, "tagRows": 2})
+    np.testing.assert_array_equal(t.aruco_corner_ids(), t.tag_corner_ids()[:, [1, 0, 3, 2]])
+    cells = aprilgrid_tag_cells(6)
+    assert cells.shape == (6, 10, 10) and not cells[:, [0, 1, -2, -1]].any() and not cells[:, :, [0, 1, -2, -1]].any()
+    image, h = t.draw(pixels_per_metre=1500, margin_m=0.02)
+    params = cv2.aruco.DetectorParameters()
+    params.markerBorderBits = 2
+    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11), params)
+    corners, ids, _ = detector.detectMarkers(image)
+    assert ids is not None and sorted(ids.ravel()) == list(range(6))
+    uv = t.points_m[:, :2] @ h[:2, :2].T + h[:2, 2]
+    for quad, tag in zip(corners, ids.ravel()):
+        nearest = np.linalg.norm(quad.reshape(4, 2)[:, None] - uv[None], axis=2).argmin(axis=1)
+        np.testing.assert_array_equal(nearest, t.aruco_corner_ids()[tag])
