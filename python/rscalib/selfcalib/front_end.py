@@ -1,14 +1,21 @@
 """The image front end of self-calibration: corners where the map is thin, patches stored at
 initialisation, and active search by normalised cross-correlation inside each feature's 99 %
-prediction ellipse, refined to sub-pixel by ECC affine alignment (docs/formulation.md)."""
+prediction ellipse, refined to sub-pixel by ECC affine alignment (docs/formulation.md §13,
+docs/sog.md §1). :class:`ImageFrontEnd` is the measurement source of
+:func:`rscalib.selfcalib.driver.run_bank` for images."""
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import cv2
 import numpy as np
+
+from ..errors import InputError
+
+if TYPE_CHECKING:
+    from .driver import FrameSearch
 
 CHI2_2DOF_99 = 9.210340371976184
 
@@ -29,6 +36,14 @@ class FrontEndOptions:
     # match); "parabola": parabola through the NCC peak only.
     subpixel: str = "affine"
     max_refine_shift_px: float = 1.5
+
+    def scaled(self, width: int) -> FrontEndOptions:
+        """These options for images ``width`` pixels wide (the sizes above are for 320 px)."""
+        scale = width / 320.0
+        return FrontEndOptions(**{**self.__dict__,
+                                  "patch_half_px": max(3, int(round(self.patch_half_px * max(1.0, scale ** 0.5)))),
+                                  "min_separation_px": self.min_separation_px * scale,
+                                  "max_search_half_px": self.max_search_half_px * scale})
 
 
 class PatchStore:
@@ -138,3 +153,36 @@ def new_corners(image: np.ndarray, avoid_uv: np.ndarray, count: int, options: Fr
     corners = cv2.goodFeaturesToTrack(image, maxCorners=count, qualityLevel=options.corner_quality,
                                       minDistance=options.min_separation_px, mask=mask)
     return np.zeros((0, 2)) if corners is None else corners.reshape(-1, 2).astype(np.float64)
+
+
+class ImageFrontEnd:
+    """The measurement source of the self-calibration loop for grayscale images (frames are images):
+    active search of each feature's stored patch, and new features at corners away from the
+    searched ones, whose patches are cut when the bank starts them. ``options`` are for 320 px wide
+    images and are scaled to ``image_size``."""
+
+    def __init__(self, options: Optional[FrontEndOptions], image_size: tuple[int, int]) -> None:
+        options = options or FrontEndOptions()
+        if options.subpixel not in ("affine", "parabola"):
+            raise InputError(f"front_end.subpixel must be 'affine' or 'parabola', not {options.subpixel!r}")
+        self.options = options.scaled(int(image_size[0]))
+        self.store = PatchStore(self.options.patch_half_px)
+
+    def measure(self, frame: np.ndarray, ids: np.ndarray, uv_pred: np.ndarray,
+                cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return active_search(frame, self.store.patches, ids, uv_pred, cov, self.options)
+
+    def forget(self, feature_ids: np.ndarray) -> None:
+        for fid in feature_ids:
+            self.store.patches.pop(int(fid), None)
+
+    def new_features(self, frame: np.ndarray, count: int, search: FrameSearch) -> np.ndarray:
+        """Corners away from the predicted and the matched pixels of ``search``, where a patch can be cut."""
+        avoid = np.vstack([search.uv_pred, search.uv[search.found]]) if len(search.ids) else np.zeros((0, 2))
+        uv = new_corners(frame, avoid, count, self.options, self.options.patch_half_px)
+        keep = [i for i, p in enumerate(uv) if self.store.cut(frame, p) is not None]
+        return uv[keep] if keep else np.zeros((0, 2))
+
+    def track(self, frame: np.ndarray, feature_ids: np.ndarray, uv: np.ndarray) -> None:
+        for fid, p in zip(feature_ids, uv):
+            self.store.patches[int(fid)] = self.store.cut(frame, p).copy()

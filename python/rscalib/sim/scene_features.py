@@ -2,20 +2,20 @@
 
 A civera-radial camera (default: the paper's 320x240 camera) moves hand-held (smooth, global shutter)
 inside a room whose walls, floor and ceiling carry random 3-D points. Every frame gives the noisy
-distorted pixels of the visible points with their true ids, plus the true trajectory. A small driver,
-:func:`track_sequence`, plays the role of the image front end (it knows the true correspondences) so
-the filter can be tested and benchmarked in isolation. docs/sog.md §11.
+distorted pixels of the visible points with their true ids, plus the true trajectory.
+:class:`TrueCorrespondences` plays the role of the image front end in the self-calibration loop (it
+knows the true correspondences) so the filter can be tested and benchmarked in isolation. docs/sog.md §11.
 
 Conventions (docs/conventions.md): OpenCV pixels; camera x right, y down, z forward;
 ``x_c = R_cw x_w + p_cw``. The filter's world is the first camera frame; :meth:`SogSequence.truth_in_first_camera`
-expresses the truth there. The projection here is a NumPy reference implementation of SPEC §4
-(Newton on the radial polynomial), independent of the C++ core.
+expresses the truth there. The projection here is a NumPy reference implementation of the
+civera-radial model (Civera et al. 2009, eq. 9–13; docs/formulation.md §10: Newton on the radial
+polynomial), independent of the C++ core.
 """
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass, field
-from typing import Any, Callable, Optional, Sequence
+from dataclasses import dataclass
+from typing import Any, Optional, Sequence
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -27,10 +27,9 @@ __all__ = [
     "PAPER_CAMERA",
     "HandheldRoomMotion",
     "SogSequence",
-    "SogRunHistory",
     "room_points",
     "simulate_sequence",
-    "track_sequence",
+    "TrueCorrespondences",
 ]
 
 
@@ -262,96 +261,66 @@ def simulate_sequence(camera: CiveraCamera = PAPER_CAMERA, duration_s: float = 8
 
 
 # --------------------------------------------------------------------------------------------------
-# Driver (the front end's role, with known correspondences)
+# The front end's role, with known correspondences
 
 
-@dataclass
-class SogRunHistory:
-    """Per processed frame: calibration mean (F, 5) and 99 % bounds (F, 5, 2) of the bank, number of
-    Gaussians, map size, measurements used, wall time of the filter calls (s); plus the map from
-    bank feature ids to scene point ids."""
+class TrueCorrespondences:
+    """The measurement source of the self-calibration loop (``rscalib.selfcalib.driver.run_bank``) for a
+    simulated sequence: frames are frame indices (:meth:`frames`), and each feature is identified
+    with the scene point it started on.
 
-    calibration: np.ndarray
-    bounds_99: np.ndarray
-    num_gaussians: np.ndarray
-    num_features: np.ndarray
-    num_used: np.ndarray
-    filter_time_s: np.ndarray
-    feature_to_point: dict = field(default_factory=dict)
-
-    @property
-    def collapse_frame(self) -> int:
-        """First frame after which the bank holds a single Gaussian (-1 if it never does)."""
-        single = np.flatnonzero(self.num_gaussians == 1)
-        return int(single[0]) if len(single) else -1
-
-
-def track_sequence(bank: Any, sequence: SogSequence, *, max_frames: Optional[int] = None,
-                   min_visible: int = 20, max_new_per_frame: int = 10, min_separation_px: float = 20.0,
-                   seed: int = 0, on_frame: Optional[Callable[[int, Any, Any], None]] = None) -> SogRunHistory:
-    """Run ``bank`` (a :class:`rscalib._core.SogBank`) over ``sequence`` like an image front end:
-
-    per frame: ``predict(dt)``, ``predict_measurements()``, look up each predicted feature's point
-    (found if the point is visible in this frame; the bank's gate plays the search ellipse),
-    ``update``; then, while fewer than ``min_visible`` features were used, add up to
-    ``max_new_per_frame`` visible unmapped points at least ``min_separation_px`` from each other
-    and from the predicted features. ``on_frame(k, bank, report)`` is called after each update.
+    measure: a predicted feature is found when its point is visible in the frame, at the point's
+    noisy pixel (the bank's gate plays the search ellipse). new_features: visible points not yet in
+    the map, in a seeded random order, at least ``min_separation_px`` from each other and from the
+    predicted features still in the map. ``feature_to_point`` maps bank feature ids to rows of
+    ``sequence.points_w``.
     """
-    rng = np.random.default_rng([0xF00D, int(seed)])
-    frames = len(sequence) if max_frames is None else min(max_frames, len(sequence))
-    feature_to_point: dict[int, int] = {}
-    mapped_points: set[int] = set()
-    hist = {k: [] for k in ("calibration", "bounds", "ng", "nf", "used", "time")}
-    for k in range(frames):
-        frame_ids = sequence.ids[k]
-        frame_uv = sequence.uv[k]
-        row_of = {int(p): i for i, p in enumerate(frame_ids)}
-        t0 = time.perf_counter()
-        if k > 0:
-            bank.predict(float(sequence.times_s[k] - sequence.times_s[k - 1]))
-        ids, uv_pred, _ = bank.predict_measurements()
-        t_filter = time.perf_counter() - t0
+
+    def __init__(self, sequence: SogSequence, *, min_separation_px: float = 20.0, seed: int = 0) -> None:
+        self.sequence = sequence
+        self.min_separation_px = float(min_separation_px)
+        self.feature_to_point: dict[int, int] = {}
+        self._mapped_points: set[int] = set()
+        self._rng = np.random.default_rng([0xF00D, int(seed)])
+        self._started: np.ndarray = np.zeros(0, dtype=np.int64)
+
+    def frames(self) -> list[tuple[float, int]]:
+        """(time s, frame index) of every frame."""
+        return [(float(t), k) for k, t in enumerate(self.sequence.times_s)]
+
+    def measure(self, frame: int, ids: np.ndarray, uv_pred: np.ndarray,
+                cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        row_of = {int(p): i for i, p in enumerate(self.sequence.ids[frame])}
         uv = np.full((len(ids), 2), np.nan)
-        matched = np.zeros(len(ids), dtype=bool)
+        found = np.zeros(len(ids), dtype=bool)
         for i, fid in enumerate(ids):
-            row = row_of.get(feature_to_point.get(int(fid), -1))
+            row = row_of.get(self.feature_to_point.get(int(fid), -1))
             if row is not None:
-                uv[i] = frame_uv[row]
-                matched[i] = True
-        t0 = time.perf_counter()
-        report = bank.update(ids, uv, matched)
-        t_filter += time.perf_counter() - t0
-        for fid in report.deleted_feature_ids:
-            mapped_points.discard(feature_to_point.pop(int(fid)))
-        needed = min_visible - int(report.num_used)
-        cap = needed if k == 0 else max_new_per_frame  # the first frame starts the map at once
-        if needed > 0:
-            taken = [uv_pred[i] for i in range(len(ids)) if int(ids[i]) in feature_to_point]
-            candidates = [i for i in rng.permutation(len(frame_ids)) if int(frame_ids[i]) not in mapped_points]
-            chosen = []
-            for i in candidates:
-                if len(chosen) >= min(needed, cap):
-                    break
-                p = frame_uv[i]
-                if all(np.hypot(*(p - q)) >= min_separation_px for q in taken):
-                    chosen.append(i)
-                    taken.append(p)
-            if chosen:
-                t0 = time.perf_counter()
-                new_ids = bank.add_features(frame_uv[chosen])
-                t_filter += time.perf_counter() - t0
-                for fid, i in zip(new_ids, chosen):
-                    feature_to_point[int(fid)] = int(frame_ids[i])
-                    mapped_points.add(int(frame_ids[i]))
-        hist["calibration"].append(np.array(bank.calibration_mean))
-        hist["bounds"].append(np.array(bank.calibration_bounds_99()))
-        hist["ng"].append(bank.num_gaussians)
-        hist["nf"].append(bank.num_features)
-        hist["used"].append(int(report.num_used))
-        hist["time"].append(t_filter)
-        if on_frame is not None:
-            on_frame(k, bank, report)
-    return SogRunHistory(calibration=np.array(hist["calibration"]), bounds_99=np.array(hist["bounds"]),
-                         num_gaussians=np.array(hist["ng"]), num_features=np.array(hist["nf"]),
-                         num_used=np.array(hist["used"]), filter_time_s=np.array(hist["time"]),
-                         feature_to_point=feature_to_point)
+                uv[i] = self.sequence.uv[frame][row]
+                found[i] = True
+        return uv, found
+
+    def forget(self, feature_ids: np.ndarray) -> None:
+        for fid in feature_ids:
+            self._mapped_points.discard(self.feature_to_point.pop(int(fid)))
+
+    def new_features(self, frame: int, count: int, search: Any) -> np.ndarray:
+        """``search``: the frame's active search (``ids``, ``uv_pred`` of the predicted features)."""
+        frame_ids, frame_uv = self.sequence.ids[frame], self.sequence.uv[frame]
+        taken = [search.uv_pred[i] for i in range(len(search.ids)) if int(search.ids[i]) in self.feature_to_point]
+        candidates = [i for i in self._rng.permutation(len(frame_ids)) if int(frame_ids[i]) not in self._mapped_points]
+        chosen = []
+        for i in candidates:
+            if len(chosen) >= count:
+                break
+            p = frame_uv[i]
+            if all(np.hypot(*(p - q)) >= self.min_separation_px for q in taken):
+                chosen.append(i)
+                taken.append(p)
+        self._started = frame_ids[chosen]
+        return frame_uv[chosen]
+
+    def track(self, frame: int, feature_ids: np.ndarray, uv: np.ndarray) -> None:
+        for fid, point in zip(feature_ids, self._started):
+            self.feature_to_point[int(fid)] = int(point)
+            self._mapped_points.add(int(point))

@@ -2,7 +2,8 @@
 
 Oracles: a NumPy implementation (written here) of the measurement function with finite-difference
 Jacobians and scipy's multivariate normal for the weight update; the simulator's ground truth
-(rscalib.sim.scene_features) for consistency (NEES) and convergence.
+(rscalib.sim.scene_features) for consistency (NEES) and convergence, run through the per-frame loop
+(rscalib.selfcalib.driver) with the simulator's known correspondences.
 """
 import numpy as np
 import pytest
@@ -10,8 +11,9 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2, multivariate_normal
 
 from rscalib import InputError, _core
+from rscalib.selfcalib.driver import run_bank
 from rscalib.selfcalib.prior import initial_bank, make_bank
-from rscalib.sim.scene_features import PAPER_CAMERA, CiveraCamera, simulate_sequence, track_sequence
+from rscalib.sim.scene_features import PAPER_CAMERA, CiveraCamera, TrueCorrespondences, simulate_sequence
 
 PAPER_SIGMAS = np.array([7.5, 10 / 3, 10 / 3, 0.02, 0.00225])
 TRUTH = PAPER_CAMERA.params
@@ -23,6 +25,13 @@ def small_bank(f_values, options=None, weights=None):
     covs = np.tile(np.diag(PAPER_SIGMAS ** 2), (len(f_values), 1, 1))
     w = np.full(len(f_values), 1.0 / len(f_values)) if weights is None else np.asarray(weights)
     return _core.SogBank(options or _core.SogOptions(), means, covs, w, (320, 240), 0.0112)
+
+
+def track(bank, seq, *, min_visible=20, max_new_per_frame=10, min_separation_px=20.0, on_frame=None):
+    """Run the bank over a simulated sequence through the self-calibration loop."""
+    source = TrueCorrespondences(seq, min_separation_px=min_separation_px)
+    return run_bank(bank, source.frames(), source, min_visible=min_visible, max_new_per_frame=max_new_per_frame,
+                    on_frame=on_frame)
 
 
 # ------------------------------------------------------------------------------------ initial grid
@@ -95,7 +104,7 @@ def test_threads_do_not_change_the_result():
         options = _core.SogOptions()
         options.num_threads = threads
         bank = make_bank(320, 240, options=options)
-        track_sequence(bank, seq)
+        track(bank, seq)
         results.append((bank.log_weights, bank.calibration_means, bank.gaussian_ids))
     np.testing.assert_array_equal(results[0][0], results[1][0])
     np.testing.assert_array_equal(results[0][1], results[1][1])
@@ -106,7 +115,7 @@ def test_threads_do_not_change_the_result():
 
 
 def reference_measurement(x, offsets, is_xyz):
-    """h(x) stacked for all features, in NumPy (SPEC §4)."""
+    """h(x) stacked for all features, in NumPy (Civera et al. 2009, eq. 9–13; docs/sog.md §5)."""
     cam = CiveraCamera(*x[:5])
     r, q = x[5:8], x[8:12]
     R = Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
@@ -180,8 +189,8 @@ def test_log_space_is_finite_for_200_dimensional_innovations():
     options.pixel_sigma = 0.05
     bank = small_bank([150.0, 194.06], options)
     reports = []
-    track_sequence(bank, seq, min_visible=100, max_new_per_frame=100, min_separation_px=8.0,
-                   on_frame=lambda k, b, r: reports.append(r))
+    track(bank, seq, min_visible=100, max_new_per_frame=100, min_separation_px=8.0,
+          on_frame=lambda k, b, r: reports.append(r))
     big = [r for r in reports if r.num_used >= 100]
     assert len(big) >= 3
     for r in big:
@@ -199,7 +208,7 @@ def test_log_space_is_finite_for_200_dimensional_innovations():
 def test_pruning_removes_the_wrong_gaussians_and_keeps_the_right_one():
     seq = simulate_sequence(duration_s=6.0, seed=0)
     bank = small_bank([150.0, 194.06, 240.0])
-    history = track_sequence(bank, seq)
+    history = track(bank, seq)
     assert bank.gaussian_ids == [1]
     assert 0 < history.collapse_frame < len(seq)
     assert abs(bank.calibration_mean[0] / TRUTH[0] - 1) < 0.01
@@ -232,7 +241,7 @@ def test_single_ekf_with_the_true_calibration_is_consistent():
         J = np.column_stack([(err(q + 1e-7 * d) - e0) / 1e-7 for d in np.eye(4)])
         orient.append(nees(e0, J @ P[8:12, 8:12] @ J.T) if k > 0 else 0.0)
 
-    track_sequence(bank, seq, on_frame=on_frame)
+    track(bank, seq, on_frame=on_frame)
     calib, orient = np.array(calib[10:]), np.array(orient[10:])
     assert calib.mean() < chi2.ppf(0.99, 5) and np.mean(calib < chi2.ppf(0.999, 5)) > 0.95
     assert orient.mean() < chi2.ppf(0.99, 3) and np.mean(orient < chi2.ppf(0.999, 3)) > 0.95
@@ -247,11 +256,11 @@ def test_108_gaussian_bank_self_calibrates():
         if not b.pruning_active:
             counts_before_guard.append(b.num_gaussians)
 
-    history = track_sequence(bank, seq, on_frame=on_frame)
+    history = track(bank, seq, on_frame=on_frame)
     # The guard holds every Gaussian until the calibration is observable.
     assert len(counts_before_guard) >= 10 and set(counts_before_guard) == {108}
     assert bank.num_gaussians < 5
-    final = history.calibration[-1]
+    final = history.mean[-1]
     bounds = history.bounds_99[-1]
     assert abs(final[0] / TRUTH[0] - 1) < 0.02
     assert np.all((bounds[:, 0] <= TRUTH) & (TRUTH <= bounds[:, 1])), (final, bounds)

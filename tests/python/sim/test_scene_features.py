@@ -2,14 +2,23 @@
 
 Oracles: the C++ camera model (rscalib.CameraModel, itself tested against a NumPy reference in
 test_camera.py) for the simulator's own NumPy projection, and central differences of the analytic
-trajectory for its velocities.
+trajectory for its velocities; the sequence's own ids and pixels for its measurement source.
 """
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from rscalib import CameraModel
-from rscalib.sim.scene_features import PAPER_CAMERA, CiveraCamera, HandheldRoomMotion, room_points, simulate_sequence
+from rscalib.sim.scene_features import (
+    PAPER_CAMERA,
+    CiveraCamera,
+    HandheldRoomMotion,
+    TrueCorrespondences,
+    room_points,
+    simulate_sequence,
+)
 
 
 @pytest.fixture(scope="module")
@@ -92,3 +101,34 @@ def test_simulation_is_deterministic():
                           noise_px=0.0)
     assert c.camera.width == 400
     np.testing.assert_array_equal(c.uv[0], c.uv_true[0])
+
+
+def test_true_correspondences_measure_the_points_the_features_started_on(sequence):
+    source = TrueCorrespondences(sequence, min_separation_px=15.0, seed=1)
+    assert source.frames()[:2] == [(0.0, 0), (sequence.times_s[1], 1)]
+    empty = SimpleNamespace(ids=np.zeros(0, dtype=np.int64), uv_pred=np.zeros((0, 2)))
+    uv0 = source.new_features(0, 12, empty)
+    assert len(uv0) == 12
+    gaps = np.linalg.norm(uv0[:, None] - uv0[None], axis=2)[np.triu_indices(12, 1)]
+    assert gaps.min() >= 15.0
+    feature_ids = np.arange(100, 112)
+    source.track(0, feature_ids, uv0)
+    points = [source.feature_to_point[int(f)] for f in feature_ids]
+    rows0 = [int(np.flatnonzero(sequence.ids[0] == p)[0]) for p in points]
+    np.testing.assert_array_equal(sequence.uv[0][rows0], uv0)
+    k = 25
+    ids = np.append(feature_ids, 7)                      # 7: a feature the source never started
+    uv, found = source.measure(k, ids, np.zeros((13, 2)), np.zeros((13, 2, 2)))
+    for i, point in enumerate(points):
+        rows = np.flatnonzero(sequence.ids[k] == point)
+        assert found[i] == bool(len(rows))
+        if len(rows):
+            np.testing.assert_array_equal(uv[i], sequence.uv[k][rows[0]])
+    assert not found[12] and np.isnan(uv[12]).all()
+    # Forgotten features free their points; new ones keep away from the predicted features.
+    source.forget(feature_ids[:2])
+    assert set(source.feature_to_point) == set(int(f) for f in feature_ids[2:])
+    predicted = SimpleNamespace(ids=feature_ids, uv_pred=uv0)
+    more = source.new_features(0, 5, predicted)
+    alive = uv0[2:]
+    assert len(more) and np.linalg.norm(more[:, None] - alive[None], axis=2).min() >= 15.0

@@ -1,0 +1,154 @@
+"""The one per-frame loop of self-calibration (docs/sog.md §1), for images and for simulated features.
+
+Per frame: predict the bank over the time step (constant velocity, docs/sog.md §3), predict the
+visible features' pixels with their merged covariances (Civera et al. 2009, eq. 5), let a
+*measurement source* search for them, update every filter, the weights and the SPRT (eq. 1–4,
+14–18), tell the source which features the bank deleted, start new features where the map is thin,
+and record the calibration. The source is the only part that differs:
+
+- :class:`rscalib.selfcalib.front_end.ImageFrontEnd`: frames are images; NCC active search inside
+  each 99 % ellipse, new features at corners;
+- ``rscalib.sim.scene_features.TrueCorrespondences``: frames are indices of a simulated sequence
+  whose correspondences are known (it satisfies :class:`MeasurementSource` structurally and does
+  not import this module).
+"""
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, Optional, Protocol
+
+import numpy as np
+
+from .. import _core
+from ..errors import InputError
+
+__all__ = ["FrameSearch", "MeasurementSource", "SelfCalibHistory", "run_bank"]
+
+
+@dataclass(frozen=True)
+class FrameSearch:
+    """One frame's active search: the features the bank predicted (``ids`` (n,), ``uv_pred`` (n, 2),
+    ``cov`` (n, 2, 2)) and what the source measured (``uv`` (n, 2), NaN where not ``found`` (n,))."""
+
+    ids: np.ndarray
+    uv_pred: np.ndarray
+    cov: np.ndarray
+    uv: np.ndarray
+    found: np.ndarray
+
+
+class MeasurementSource(Protocol):
+    """What the loop needs from a front end. ``frame`` is what the frames iterable pairs with each
+    time: an image for the image front end, a frame index for the simulator."""
+
+    def measure(self, frame: Any, ids: np.ndarray, uv_pred: np.ndarray,
+                cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Search ``frame`` for the predicted features: pixels (n, 2) (NaN where not found) and
+        found (n,) bool. Every predicted feature counts as searched (the deletion rule needs misses)."""
+        ...
+
+    def forget(self, feature_ids: np.ndarray) -> None:
+        """The bank deleted these features."""
+        ...
+
+    def new_features(self, frame: Any, count: int, search: FrameSearch) -> np.ndarray:
+        """At most ``count`` pixels (m, 2) where new features should start, away from the features of
+        this frame's ``search``; (0, 2) when there are none."""
+        ...
+
+    def track(self, frame: Any, feature_ids: np.ndarray, uv: np.ndarray) -> None:
+        """The bank started ``feature_ids`` at ``uv``, the pixels :meth:`new_features` just returned."""
+        ...
+
+
+@dataclass
+class SelfCalibHistory:
+    """Per processed frame: its index in the frame sequence, the bank's moment-matched calibration
+    ``mean`` (K, 5) [f, cx, cy, k1 (mm^-2), k2 (mm^-4)] and 99 % ``bounds_99`` (K, 5, 2), the number of
+    Gaussians, the measurements used in the update, the map size after the frame, and the wall time
+    of the filter calls (s); ``elapsed_s`` is the wall time of the whole loop."""
+
+    frame: np.ndarray
+    mean: np.ndarray
+    bounds_99: np.ndarray
+    gaussians: np.ndarray
+    features_used: np.ndarray
+    map_size: np.ndarray
+    filter_time_s: np.ndarray
+    elapsed_s: float
+
+    def __len__(self) -> int:
+        return len(self.frame)
+
+    @property
+    def collapse_frame(self) -> Optional[int]:
+        """The first frame after which the bank holds one Gaussian (None if it never does)."""
+        single = np.flatnonzero(self.gaussians == 1)
+        return int(self.frame[single[0]]) if len(single) else None
+
+    @property
+    def frames_per_s(self) -> float:
+        return len(self) / self.elapsed_s if self.elapsed_s > 0 else float("inf")
+
+    def summary_dict(self) -> dict:
+        return {"frame": self.frame.tolist(), "mean": self.mean.tolist(), "bounds_99": self.bounds_99.tolist(),
+                "gaussians": self.gaussians.tolist(), "features_used": self.features_used.tolist()}
+
+
+def run_bank(bank: _core.SogBank, frames: Iterable[tuple[float, Any]], source: MeasurementSource, *,
+             min_visible: int = 20, max_new_per_frame: int = 10, max_frames: Optional[int] = None,
+             on_frame: Optional[Callable[[int, _core.SogBank, _core.SogUpdateReport], None]] = None
+             ) -> SelfCalibHistory:
+    """Run ``bank`` over ``frames``, pairs (time in s, frame) with increasing times; a frame of None
+    (unreadable) is skipped. While fewer than ``min_visible`` measurements were used in a frame's
+    update, ask ``source`` for new features: as many as missing in the first frame (to start the
+    map at once), at most ``max_new_per_frame`` later. Stops after ``max_frames`` frames.
+    ``on_frame(k, bank, report)`` is called after each processed frame."""
+    rows: dict[str, list] = {name: [] for name in ("frame", "mean", "bounds", "gaussians", "used", "map", "time")}
+    t_prev = None
+    started = time.perf_counter()
+    for k, (t_s, frame) in enumerate(itertools.islice(frames, max_frames)):
+        if frame is None:
+            continue
+        first = t_prev is None
+        t0 = time.perf_counter()
+        if not first:
+            dt = float(t_s - t_prev)
+            if not dt > 0:
+                raise InputError(f"frame times must increase (frame {k}: dt = {dt} s)")
+            bank.predict(dt)
+        ids, uv_pred, cov = bank.predict_measurements()
+        filter_s = time.perf_counter() - t0
+        uv, found = source.measure(frame, ids, uv_pred, cov)
+        t0 = time.perf_counter()
+        report = bank.update(ids, uv, found)
+        filter_s += time.perf_counter() - t0
+        source.forget(report.deleted_feature_ids)
+        needed = min_visible - int(report.num_used)
+        if needed > 0:
+            count = needed if first else min(needed, max_new_per_frame)
+            new_uv = source.new_features(frame, count, FrameSearch(ids, uv_pred, cov, uv, found))
+            if len(new_uv):
+                t0 = time.perf_counter()
+                new_ids = bank.add_features(new_uv)
+                filter_s += time.perf_counter() - t0
+                source.track(frame, new_ids, new_uv)
+        t_prev = t_s
+        rows["frame"].append(k)
+        rows["mean"].append(np.asarray(bank.calibration_mean))
+        rows["bounds"].append(np.asarray(bank.calibration_bounds_99()))
+        rows["gaussians"].append(bank.num_gaussians)
+        rows["used"].append(int(report.num_used))
+        rows["map"].append(bank.num_features)
+        rows["time"].append(filter_s)
+        if on_frame is not None:
+            on_frame(k, bank, report)
+    elapsed = time.perf_counter() - started
+    if not rows["frame"]:
+        raise InputError("no frames to process")
+    return SelfCalibHistory(frame=np.asarray(rows["frame"]), mean=np.asarray(rows["mean"]),
+                            bounds_99=np.asarray(rows["bounds"]), gaussians=np.asarray(rows["gaussians"]),
+                            features_used=np.asarray(rows["used"]), map_size=np.asarray(rows["map"]),
+                            filter_time_s=np.asarray(rows["time"]), elapsed_s=elapsed)
