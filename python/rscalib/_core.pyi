@@ -144,7 +144,7 @@ class CameraModel:
         ...
 class RsSolverOptions:
     """
-    Options of the line-delay solve (SPEC §2).
+    Options of the line-delay solve (docs/formulation.md).
     """
     compute_covariance: bool
     estimate_line_delay: bool
@@ -829,7 +829,7 @@ class SogBank:
         ...
 def error_noise_map(line_delay_s: typing.SupportsFloat | typing.SupportsIndex, image_velocity_px_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[2, 1]"]) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[2, 2]"]:
     """
-    A = I - d [[0, u_dot], [0, v_dot]] (SPEC §2).
+    A = I - d [[0, u_dot], [0, v_dot]] (Oth et al. 2013, eq. 15-21; docs/formulation.md §4).
     """
 def evaluate_line_delay(frame_time_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], uv: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], point_w: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 3]"], camera: CameraModel, trajectory: BSpline, line_delay_s: typing.SupportsFloat | typing.SupportsIndex, options: RsSolverOptions) -> RsSolveSummary:
     """
