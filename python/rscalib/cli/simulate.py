@@ -1,4 +1,5 @@
-"""`rscalib simulate`: render a rolling-shutter video of a target with its ground truth (SPEC §5)."""
+"""`rscalib simulate`: render a rolling-shutter video of a target with its ground truth
+(rscalib.sim.target_video; docs/architecture.md)."""
 from __future__ import annotations
 
 import argparse
@@ -87,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
         if result.frames_dir is not None:
             written.append(f"{result.frames_dir.name}/ ({result.num_frames} PNG + timestamps.txt)")
         print(f"rscalib simulate: {result.num_frames} frames {c.width}x{c.height} at {result.fps:g} fps, "
-              f"{result.target.kind}, line delay {result.line_delay_s * 1e6:.3f} us/row "
+              f"{result.target.target_type}, line delay {result.line_delay_s * 1e6:.3f} us/row "
               f"(readout {result.line_delay_s * c.height * 1e3:.3f} ms)"
               + (f", light flickering at {args.flicker_hz:g} Hz (depth {args.flicker_depth:g})"
                  if args.flicker_hz is not None else ""))

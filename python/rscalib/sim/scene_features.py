@@ -21,6 +21,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..selfcalib.prior import PAPER_CAMERA_PARAMS, PAPER_IMAGE_SIZE, PAPER_PIXEL_SIZE_MM
+from .trajectories import HandheldRoomMotion
 
 __all__ = [
     "CiveraCamera",
@@ -90,7 +91,7 @@ PAPER_CAMERA = CiveraCamera()
 
 
 # --------------------------------------------------------------------------------------------------
-# Scene and motion
+# Scene (the motion, HandheldRoomMotion, is in sim/trajectories.py)
 
 
 def room_points(size_m: Sequence[float] = (6.0, 2.7, 6.0), center_m: Sequence[float] = (0.0, -0.1, 0.5),
@@ -113,57 +114,6 @@ def room_points(size_m: Sequence[float] = (6.0, 2.7, 6.0), center_m: Sequence[fl
             p[:, b] = rng.uniform(-0.5, 0.5, count) * size[b]
             pts.append(p + center)
     return np.concatenate(pts)
-
-
-class HandheldRoomMotion:
-    """Smooth hand-held motion inside a room: the camera centre wanders around ``center_m`` and the
-    camera looks roughly along world +z, swinging in yaw, pitch and roll.
-
-    Each of the six channels (position x, y, z; yaw, pitch, roll) is a sum of ``components``
-    sinusoids with seeded log-uniform frequencies in ``freq_range_hz``, random phases and weights
-    ~ f^-1/2 summing to the channel's peak (``position_amplitude_m``, ``rotation_amplitude_deg``),
-    so the peaks are hard bounds. Analytic (C-infinity) and deterministic given ``seed``.
-    Poses: ``R_wc(t)`` (camera to world) and centre ``r(t)``.
-    """
-
-    def __init__(self, seed: int = 0, center_m: Sequence[float] = (0.0, 0.0, 0.0),
-                 position_amplitude_m: Sequence[float] = (0.35, 0.15, 0.3),
-                 rotation_amplitude_deg: Sequence[float] = (30.0, 12.0, 10.0),
-                 freq_range_hz: tuple[float, float] = (0.1, 1.2), components: int = 3,
-                 speed: float = 1.0) -> None:
-        rng = np.random.default_rng([0xCA11, int(seed)])
-        self.center_m = np.asarray(center_m, dtype=np.float64).reshape(3)
-        lo, hi = np.log(freq_range_hz[0]), np.log(freq_range_hz[1])
-        self.freqs_hz = np.exp(rng.uniform(lo, hi, size=(6, components))) * float(speed)
-        self.phases_rad = rng.uniform(0.0, 2.0 * np.pi, size=(6, components))
-        weights = self.freqs_hz ** -0.5 * rng.uniform(0.5, 1.0, size=(6, components))
-        weights /= weights.sum(axis=1, keepdims=True)
-        peaks = np.concatenate([np.asarray(position_amplitude_m, dtype=np.float64),
-                                np.deg2rad(np.asarray(rotation_amplitude_deg, dtype=np.float64))])
-        self.coeffs = weights * peaks[:, None]
-
-    def _channels(self, t_s: np.ndarray) -> np.ndarray:
-        arg = 2.0 * np.pi * self.freqs_hz[None] * t_s[:, None, None] + self.phases_rad[None]
-        return np.einsum("nck,ck->nc", np.sin(arg), self.coeffs)
-
-    def pose_wc(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Camera-to-world rotations (n, 3, 3) and camera centres (n, 3) at times t."""
-        t_s = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).reshape(-1)
-        ch = self._channels(t_s)
-        # Yaw about world y (down), then pitch about camera x, then roll about camera z.
-        rot = Rotation.from_euler("YXZ", ch[:, 3:6])
-        return rot.as_matrix(), self.center_m + ch[:, :3]
-
-    def velocities(self, t_s: np.ndarray, h_s: float = 1e-5) -> tuple[np.ndarray, np.ndarray]:
-        """Linear velocity in the world (n, 3) and angular velocity in the camera frame (n, 3),
-        by central differences (error ~h^2); ``dR_wc/dt = R_wc [w]x``."""
-        t_s = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).reshape(-1)
-        n = len(t_s)
-        R, r = self.pose_wc(np.concatenate([t_s + h_s, t_s - h_s]))
-        v = (r[:n] - r[n:]) / (2 * h_s)
-        R0, _ = self.pose_wc(t_s)
-        W = np.einsum("nji,njk->nik", R0, (R[:n] - R[n:]) / (2 * h_s))
-        return v, np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=1)
 
 
 # --------------------------------------------------------------------------------------------------

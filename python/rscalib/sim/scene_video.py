@@ -1,9 +1,11 @@
-"""Synthetic image sequences of a textured 3-D scene for the SOG self-calibration engine (SPEC §4).
+"""Synthetic image sequences of a textured 3-D scene for the SOG self-calibration engine (Civera et
+al. 2009; docs/sog.md).
 
 A global-shutter camera (every pixel at the frame time) with known calibration — by default the
-``civera-radial`` camera of Civera et al. 2009 (320×240, f 194.06 px) — moves hand-held inside a
-box-shaped room whose walls, floor and ceiling carry procedural, seeded textures full of corners at
-several scales (good for FAST / Shi-Tomasi features and NCC patch matching).
+``civera-radial`` camera of Civera et al. 2009 (320×240, f 194.06 px) — moves hand-held
+(:class:`rscalib.sim.trajectories.RoomWalkTrajectory`) inside a box-shaped room whose walls, floor and
+ceiling carry procedural, seeded textures full of corners at several scales (good for FAST /
+Shi-Tomasi features and NCC patch matching).
 
 Rendering is by inverse mapping. Every pixel (``supersampling²`` sub-pixel samples) is unprojected
 once through the camera model to a ray ``(x, y, 1)`` in the camera frame — constant across frames,
@@ -25,21 +27,22 @@ from __future__ import annotations
 import json
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Optional, Sequence, Union
+from typing import Iterator, Optional, Sequence, Union
 
 import cv2
 import numpy as np
 
 from .._core import CameraModel
 from ..selfcalib.prior import PAPER_CAMERA_PARAMS, PAPER_IMAGE_SIZE, PAPER_PIXEL_SIZE_MM
+from .target_video import to_uint8
+from .trajectories import RoomWalkTrajectory, Trajectory
 
 __all__ = [
     "PAPER_CAMERA_PARAMS",
     "PAPER_PIXEL_SIZE_MM",
     "RenderedFrames",
-    "RoomWalkTrajectory",
     "Scene",
     "SceneRenderer",
     "SceneSequence",
@@ -236,107 +239,6 @@ def planes_scene(seed: int = 0, texels_per_m: float = 200.0, num_planes: int = 4
                                     procedural_texture(size[0], size[1], tex_seed, **far), far["texels_per_m"],
                                     texture_seed=tex_seed))
     return Scene(planes, description="panels in front of a back wall, camera looking along +x, z up")
-
-
-# --------------------------------------------------------------------------------------------------
-# Trajectory
-
-
-def _sinusoid_bank(rng: np.random.Generator, channels: int, components: int,
-                   freq_range_hz: tuple[float, float], peaks: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Frequencies, phases, amplitudes (channels, components): log-uniform frequencies, weights
-    ~ f^-1/2 normalised so that each channel's peak is a hard bound."""
-    lo, hi = np.log(freq_range_hz[0]), np.log(freq_range_hz[1])
-    freqs = np.exp(rng.uniform(lo, hi, size=(channels, components)))
-    phases = rng.uniform(0.0, 2.0 * np.pi, size=(channels, components))
-    weights = freqs ** -0.5 * rng.uniform(0.5, 1.0, size=(channels, components))
-    weights /= weights.sum(axis=1, keepdims=True)
-    return freqs, phases, weights * np.asarray(peaks, dtype=np.float64)[:, None]
-
-
-def _eval_bank(t_s: np.ndarray, bank: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
-    freqs, phases, amps = bank
-    arg = 2.0 * np.pi * freqs[None] * t_s[:, None, None] + phases[None]
-    return np.einsum("nck,ck->nc", np.sin(arg), amps)
-
-
-@dataclass
-class RoomWalkTrajectory:
-    """Smooth hand-held motion of a person looking around inside a room (world z up).
-
-    The camera centre wanders around ``center_m`` by sums of slow sinusoids (peaks
-    ``position_amplitude_m``, a hard bound, so the camera stays inside the room). The viewing
-    direction has yaw ``yaw0 + Δψ(t)`` (``yaw0`` seeded, ``|Δψ| ≤ yaw_amplitude_deg``), elevation
-    ``base_pitch_deg + Δθ(t)`` and a roll about the optical axis, plus a small hand tremor at
-    1–4 Hz. With the defaults: ≈ 0.2–0.4 m/s and ≈ 10–30 °/s typical, i.e. a few px of image motion
-    per frame at 30 fps with the paper's camera, and ample parallax for monocular SLAM.
-    Every channel is analytic (C∞) and deterministic given ``seed``.
-    """
-
-    seed: int = 0
-    center_m: Sequence[float] = (0.0, 0.0, 1.45)
-    position_amplitude_m: Sequence[float] = (0.7, 0.5, 0.08)
-    position_freq_range_hz: tuple[float, float] = (0.06, 0.3)
-    yaw_amplitude_deg: float = 70.0
-    pitch_amplitude_deg: float = 12.0
-    roll_amplitude_deg: float = 6.0
-    base_pitch_deg: float = -5.0
-    rotation_freq_range_hz: tuple[float, float] = (0.04, 0.35)
-    tremor_amplitude_deg: float = 0.3
-    components: int = 3
-    yaw0_deg: Optional[float] = None  # None: seeded
-    _banks: dict = field(init=False, repr=False)
-
-    def __post_init__(self) -> None:
-        rng = np.random.default_rng([0x2D0F, int(self.seed)])
-        self.center_m = np.asarray(self.center_m, dtype=np.float64).reshape(3)
-        self.position_amplitude_m = np.asarray(self.position_amplitude_m, dtype=np.float64).reshape(3)
-        if self.yaw0_deg is None:
-            self.yaw0_deg = float(rng.uniform(0.0, 360.0))
-        else:
-            rng.uniform()  # keep the later draws independent of whether yaw0 was given
-        rot_peaks = np.deg2rad([self.yaw_amplitude_deg, self.pitch_amplitude_deg, self.roll_amplitude_deg])
-        self._banks = {
-            "position": _sinusoid_bank(rng, 3, self.components, self.position_freq_range_hz,
-                                       self.position_amplitude_m),
-            "rotation": _sinusoid_bank(rng, 3, self.components, self.rotation_freq_range_hz, rot_peaks),
-            "tremor": _sinusoid_bank(rng, 3, 2, (1.0, 4.0), np.full(3, np.deg2rad(self.tremor_amplitude_deg))),
-        }
-
-    def camera_center_w(self, t_s: np.ndarray) -> np.ndarray:
-        """(n, 3) camera centre in the world frame."""
-        t_s = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).reshape(-1)
-        return self.center_m + _eval_bank(t_s, self._banks["position"])
-
-    def angles_rad(self, t_s: np.ndarray) -> np.ndarray:
-        """(n, 3) yaw ψ (about world z, from +x), elevation θ (up positive), roll about the optical axis."""
-        t_s = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).reshape(-1)
-        ang = _eval_bank(t_s, self._banks["rotation"]) + _eval_bank(t_s, self._banks["tremor"])
-        return ang + np.deg2rad([self.yaw0_deg, self.base_pitch_deg, 0.0])
-
-    def pose_cw(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """World-to-camera pose at times t: ``x_c = R x_w + p``; returns R (n, 3, 3), p (n, 3)."""
-        ang = self.angles_rad(t_s)
-        psi, theta, roll = ang[:, 0], ang[:, 1], ang[:, 2]
-        z = np.stack([np.cos(psi) * np.cos(theta), np.sin(psi) * np.cos(theta), np.sin(theta)], axis=1)
-        x = np.stack([np.sin(psi), -np.cos(psi), np.zeros_like(psi)], axis=1)  # horizontal, to the right
-        y = np.cross(z, x)  # right-handed with y pointing down for an upright view
-        R_level = np.stack([x, y, z], axis=1)  # rows = camera axes in world coordinates
-        c, s = np.cos(roll), np.sin(roll)
-        R_roll = np.zeros((len(roll), 3, 3))
-        R_roll[:, 0, 0], R_roll[:, 0, 1], R_roll[:, 1, 0], R_roll[:, 1, 1] = c, -s, s, c
-        R_roll[:, 2, 2] = 1.0
-        R = R_roll @ R_level
-        p = -np.einsum("nij,nj->ni", R, self.camera_center_w(t_s))
-        return R, p
-
-    def describe(self) -> dict:
-        return {"type": "RoomWalkTrajectory", "seed": int(self.seed), "center_m": self.center_m.tolist(),
-                "position_amplitude_m": self.position_amplitude_m.tolist(),
-                "yaw0_deg": self.yaw0_deg, "yaw_amplitude_deg": self.yaw_amplitude_deg,
-                "pitch_amplitude_deg": self.pitch_amplitude_deg, "roll_amplitude_deg": self.roll_amplitude_deg,
-                "base_pitch_deg": self.base_pitch_deg, "tremor_amplitude_deg": self.tremor_amplitude_deg}
 
 
 # --------------------------------------------------------------------------------------------------
@@ -578,7 +480,7 @@ class _PosedFrames:
     p_cw: np.ndarray
     camera: CameraModel
     renderer: SceneRenderer
-    trajectory: Any
+    trajectory: Trajectory
     fps: float
     seed: int
     noise_sigma: float
@@ -610,8 +512,8 @@ class SceneSequence(_PosedFrames):
 
 
 def _setup(num_frames: int, seed: int, camera: Optional[CameraModel], fps: float, t0_s: float,
-           scene: Optional[Scene], trajectory: Any, supersampling: int
-           ) -> tuple[CameraModel, SceneRenderer, Any, np.ndarray, np.ndarray, np.ndarray]:
+           scene: Optional[Scene], trajectory: Optional[Trajectory], supersampling: int
+           ) -> tuple[CameraModel, SceneRenderer, Trajectory, np.ndarray, np.ndarray, np.ndarray]:
     if num_frames < 1 or not fps > 0:
         raise ValueError("render_scene: num_frames must be >= 1 and fps > 0")
     camera = default_camera() if camera is None else camera
@@ -626,16 +528,13 @@ def _setup(num_frames: int, seed: int, camera: Optional[CameraModel], fps: float
 def _frames(renderer: SceneRenderer, R: np.ndarray, p: np.ndarray, seed: int, noise_sigma: float
             ) -> Iterator[np.ndarray]:
     for i in range(len(R)):
-        img = renderer.render(R[i], p[i]) * 255.0
-        if noise_sigma > 0:
-            # Per-frame stream: frame i's noise does not depend on how many frames were rendered.
-            img = img + np.random.default_rng([0x401E, int(seed), i]).normal(0.0, noise_sigma, img.shape)
-        yield np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        # Per-frame noise stream: frame i's noise does not depend on how many frames were rendered.
+        yield to_uint8(renderer.render(R[i], p[i]), noise_sigma, np.random.default_rng([0x401E, int(seed), i]))
 
 
 def render_scene_frames(num_frames: int = 30, seed: int = 0, camera: Optional[CameraModel] = None, *,
                         fps: float = 30.0, t0_s: float = 0.0, scene: Optional[Scene] = None,
-                        trajectory: Any = None, supersampling: int = 2, noise_sigma: float = 0.0
+                        trajectory: Optional[Trajectory] = None, supersampling: int = 2, noise_sigma: float = 0.0
                         ) -> RenderedFrames:
     """Render ``num_frames`` GS frames at ``t0_s + i / fps`` into memory (see module docstring).
 
@@ -653,7 +552,7 @@ def render_scene_frames(num_frames: int = 30, seed: int = 0, camera: Optional[Ca
 
 def render_scene_sequence(out_dir: Union[str, Path], num_frames: int = 300, seed: int = 0,
                           camera: Optional[CameraModel] = None, *, fps: float = 30.0, t0_s: float = 0.0,
-                          scene: Optional[Scene] = None, trajectory: Any = None, supersampling: int = 2,
+                          scene: Optional[Scene] = None, trajectory: Optional[Trajectory] = None, supersampling: int = 2,
                           noise_sigma: float = 0.0) -> SceneSequence:
     """Render a sequence to ``out_dir``: ``frame_000000.png`` …, ``timestamps.txt``, ``truth.json``.
 

@@ -3,22 +3,20 @@
 Every output pixel ``(u, v)`` of the frame stamped ``t_i`` is rendered by inverse mapping at the
 row time ``t = t_i + v * d`` (docs/conventions.md): the pixel is unprojected through the camera
 (lens distortion included) to a ray, the ray is intersected with the target plane z = 0 using the
-pose ``T_cw(t)`` (world point ``X = Rᵀ(λ ray − p)``), and a procedural target texture is sampled
-there. Anti-aliasing: each pixel is the mean of ``supersample²`` sub-pixel samples, each with the row
-time of its own sub-row, and each sample box-filters the texture over its own footprint on the
-target (exact for the axis-aligned edges of checkerboards and AprilGrids, a radial ramp for
-circles), so edges land where the geometry puts them rather than on a sub-pixel lattice. Motion
-blur: the mean over ``exposure_samples`` times spread over ``[t, t + exposure_s]`` (a row's
-exposure *starts* at its row time). Noise: Gaussian on the 8-bit intensities.
+pose ``T_cw(t)`` (world point ``X = Rᵀ(λ ray − p)``), and the target's texture
+(:class:`rscalib.sim.target_texture.TargetTexture`) is sampled there. Anti-aliasing: each pixel is
+the mean of ``supersample²`` sub-pixel samples, each with the row time of its own sub-row, and each
+sample box-filters the texture over its own footprint on the target. Motion blur: the mean over
+``exposure_samples`` times spread over ``[t, t + exposure_s]`` (a row's exposure *starts* at its row
+time). Noise: Gaussian on the 8-bit intensities.
 
 The corners of a rendered frame therefore sit at the exact rolling-shutter projection
 ``v = v_proj(T_cw(t_i + v d) P)`` of the target points, which is what ``truth.json`` records
 (computed with :func:`rscalib.sim.target_observations.rs_projection`, independent of this renderer).
 
-Target frames (world = target): checkerboard and circle grids as in docs/conventions.md (x along
-the columns, y along the rows, camera on the z < 0 side). The AprilGrid uses Kalibr's frame (origin
-at the bottom-left corner of tag 0, y up the printed page), which is seen from the z > 0 side; the
-default trajectory is turned by 180° about x for it so the camera still faces the printed side.
+Targets are :class:`rscalib.io.targets.Target` (world = target frame, docs/conventions.md); the
+default trajectory is :func:`rscalib.sim.trajectories.target_trajectory` (for Kalibr's AprilGrid,
+seen from its printed z > 0 side).
 """
 from __future__ import annotations
 
@@ -39,481 +37,25 @@ from scipy.spatial.transform import Rotation
 from .._core import CameraModel, unwrap_rotation_vectors
 from .._progress import Progress
 from ..errors import InputError
-from ..io.cameras import opencv_matrices
-from .target_observations import HandheldTrajectory, rs_projection, standoff_distance_m
+from ..io.cameras import opencv_matrices, write_opencv_yaml
+from ..io.targets import Target
+from .target_observations import default_camera, rs_projection
+from .target_texture import TargetTexture, texture_of
+from .trajectories import ShiftedTrajectory, Trajectory, target_trajectory, trajectory_from_description
 
 __all__ = [
-    "RenderTarget",
     "RenderedVideo",
     "RollingShutterRenderer",
-    "default_camera",
-    "default_trajectory",
     "load_truth",
     "render_video",
     "to_uint8",
     "trajectory_from_truth",
+    "truth_uv",
 ]
-
-# Reflectances of the printed target and of what lies around it (fractions of full scale): not 0
-# and 1, so that the noise is not clipped.
-BLACK = 0.08
-WHITE = 0.90
-BACKGROUND = 0.45
 
 # Frame i of the video is stamped i / fps (row 0 starts exposure then).
 VIDEO_NAME = "video.avi"
-# Kalibr's AprilGrid tags: 6x6 data cells inside a 2-cell black border (OpenCV's default is 1).
-TAG_BORDER_BITS = 2
-TAG_CELLS = 6 + 2 * TAG_BORDER_BITS
 MAX_EXPOSURE_SAMPLES = 64
-
-
-# --------------------------------------------------------------------------------------------------
-# Targets
-
-
-def _ramp(x: np.ndarray) -> np.ndarray:
-    """Box-filtered step: the fraction of a unit-width footprint centred at -x ... past the edge."""
-    return np.clip(x + 0.5, 0.0, 1.0)
-
-
-@dataclass(frozen=True)
-class RenderTarget:
-    """A printed planar target: geometry (Kalibr's fields) plus what the renderer needs to draw it.
-
-    kind:          "checkerboard", "circlegrid" or "aprilgrid".
-    cols, rows:    inner corners (checkerboard), circles (circlegrid; for an asymmetric grid the
-                   circles per row), tags (aprilgrid).
-    spacing_m:     checkerboard column spacing (square width, along x); circle spacing (Kalibr's
-                   spacingMeters); AprilGrid tag size (edge to edge of the black border).
-    row_spacing_m: checkerboard row spacing (square height, along y); default = spacing_m.
-    asymmetric:    circlegrid only: OpenCV/Kalibr asymmetric layout, point (r, c) at
-                   ((2c + r % 2) s, r s).
-    tag_spacing:   aprilgrid only: gap between tags as a fraction of the tag size (Kalibr).
-    circle_radius_m: circlegrid only; default a quarter of the nearest-neighbour distance.
-    margin_m:      white paper around the pattern; default one square / spacing / half a tag.
-
-    Point ids: checkerboard and circles ``r * cols + c``; AprilGrid Kalibr's 2·rows × 2·cols corner
-    grid, id ``r * 2 cols + c`` at ``(c//2 · P + c%2 · size, r//2 · P + r%2 · size)`` with pitch
-    ``P = size (1 + tag_spacing)``.
-    """
-
-    kind: str = "checkerboard"
-    cols: int = 9
-    rows: int = 6
-    spacing_m: float = 0.04
-    row_spacing_m: Optional[float] = None
-    asymmetric: bool = False
-    tag_spacing: float = 0.3
-    circle_radius_m: Optional[float] = None
-    margin_m: Optional[float] = None
-
-    def __post_init__(self) -> None:
-        if self.kind not in ("checkerboard", "circlegrid", "aprilgrid"):
-            raise InputError(f"unknown target type {self.kind!r} (checkerboard, circlegrid, aprilgrid)")
-        if int(self.cols) < 1 or int(self.rows) < 1:
-            raise InputError("target columns and rows must be >= 1")
-        if self.kind == "checkerboard" and (self.cols < 2 or self.rows < 2):
-            raise InputError("a checkerboard needs at least 2x2 inner corners")
-        if not (self.spacing_m > 0 and (self.row_spacing_m is None or self.row_spacing_m > 0)):
-            raise InputError("target spacing must be positive")
-        if self.kind == "aprilgrid":
-            if not 0 < self.tag_spacing <= 1:
-                raise InputError("aprilgrid tagSpacing must be in (0, 1]")
-            if self.cols * self.rows > 587:
-                raise InputError("an AprilGrid (36h11) has at most 587 tags")
-        if self.kind == "circlegrid":
-            nn = self.spacing_m * (math.sqrt(2.0) if self.asymmetric else 1.0)
-            if self.circle_radius_m is not None and not 0 < self.circle_radius_m < 0.5 * nn:
-                raise InputError("circle radius must be positive and less than half the circle distance")
-
-    # -- construction ---------------------------------------------------------------------------
-    @classmethod
-    def named(cls, name: str) -> RenderTarget:
-        """Built-in targets: checkerboard (9x6, 40 mm), circlegrid (7x5, 40 mm), acircles (OpenCV's
-        asymmetric 4x11, 20 mm) and aprilgrid (Kalibr's 6x6 tags of 88 mm, spacing 0.3)."""
-        presets = {
-            "checkerboard": cls("checkerboard", 9, 6, 0.04),
-            "circlegrid": cls("circlegrid", 7, 5, 0.04),
-            "acircles": cls("circlegrid", 4, 11, 0.02, asymmetric=True),
-            "aprilgrid": cls("aprilgrid", 6, 6, 0.088, tag_spacing=0.3),
-        }
-        if name not in presets:
-            raise InputError(f"unknown target {name!r}: use {', '.join(presets)} or a Kalibr target YAML file")
-        return presets[name]
-
-    @classmethod
-    def from_kalibr(cls, data: dict, source: str = "target") -> RenderTarget:
-        """From Kalibr's target YAML fields (a dict as loaded from the file)."""
-        if not isinstance(data, dict) or "target_type" not in data:
-            raise InputError(f"{source}: a Kalibr target needs 'target_type'")
-        kind = str(data["target_type"]).strip()
-        try:
-            if kind == "checkerboard":
-                return cls(kind, int(data["targetCols"]), int(data["targetRows"]),
-                           float(data["colSpacingMeters"]), float(data["rowSpacingMeters"]))
-            if kind == "circlegrid":
-                return cls(kind, int(data["targetCols"]), int(data["targetRows"]), float(data["spacingMeters"]),
-                           asymmetric=bool(data.get("asymmetricGrid", False)))
-            if kind == "aprilgrid":
-                return cls(kind, int(data["tagCols"]), int(data["tagRows"]), float(data["tagSize"]),
-                           tag_spacing=float(data["tagSpacing"]))
-        except (KeyError, TypeError, ValueError) as error:
-            raise InputError(f"{source}: incomplete {kind} target ({error})") from None
-        raise InputError(f"{source}: target_type {kind!r} cannot be rendered (checkerboard, circlegrid, aprilgrid)")
-
-    @classmethod
-    def from_file(cls, path) -> RenderTarget:
-        path = Path(path)
-        if not path.is_file():
-            raise InputError(f"target file not found: {path}")
-        try:
-            data = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as error:
-            raise InputError(f"{path}: not valid YAML ({str(error).splitlines()[0]})") from None
-        return cls.from_kalibr(data, str(path))
-
-    @classmethod
-    def parse(cls, spec: Union[str, RenderTarget, Path, Any]) -> RenderTarget:
-        """A RenderTarget, a built-in name, a Kalibr target YAML path, or a rscalib.io.targets.Target."""
-        if isinstance(spec, RenderTarget):
-            return spec
-        if hasattr(spec, "target_type") and isinstance(getattr(spec, "spec", None), dict):
-            return cls.from_kalibr({"target_type": spec.target_type, **spec.spec})
-        spec_str = str(spec)
-        if isinstance(spec, Path) or spec_str.endswith((".yaml", ".yml")) or os.sep in spec_str:
-            return cls.from_file(spec_str)
-        return cls.named(spec_str)
-
-    # -- geometry -------------------------------------------------------------------------------
-    @property
-    def row_pitch_m(self) -> float:
-        return float(self.row_spacing_m if self.row_spacing_m is not None else self.spacing_m)
-
-    @property
-    def tag_pitch_m(self) -> float:
-        return self.spacing_m * (1.0 + self.tag_spacing)
-
-    @property
-    def radius_m(self) -> float:
-        if self.circle_radius_m is not None:
-            return float(self.circle_radius_m)
-        return 0.25 * self.spacing_m * (math.sqrt(2.0) if self.asymmetric else 1.0)
-
-    def points(self) -> np.ndarray:
-        """(P, 3) target points on z = 0 (ids as in the class docstring)."""
-        if self.kind == "aprilgrid":
-            r, c = np.divmod(np.arange(4 * self.rows * self.cols), 2 * self.cols)
-            x = (c // 2) * self.tag_pitch_m + (c % 2) * self.spacing_m
-            y = (r // 2) * self.tag_pitch_m + (r % 2) * self.spacing_m
-        else:
-            r, c = np.divmod(np.arange(self.rows * self.cols), self.cols)
-            if self.kind == "circlegrid" and self.asymmetric:
-                x, y = (2 * c + r % 2) * self.spacing_m, r * self.spacing_m
-            elif self.kind == "circlegrid":
-                x, y = c * self.spacing_m, r * self.spacing_m
-            else:
-                x, y = c * self.spacing_m, r * self.row_pitch_m
-        return np.column_stack([x, y, np.zeros(len(x))]).astype(np.float64)
-
-    def pattern_bounds_m(self) -> tuple[float, float, float, float]:
-        """(x0, x1, y0, y1) of the printed pattern (squares, circles, tags and corner squares)."""
-        if self.kind == "checkerboard":
-            return (-self.spacing_m, self.cols * self.spacing_m, -self.row_pitch_m, self.rows * self.row_pitch_m)
-        if self.kind == "circlegrid":
-            pts, rad = self.points(), self.radius_m
-            return (pts[:, 0].min() - rad, pts[:, 0].max() + rad, pts[:, 1].min() - rad, pts[:, 1].max() + rad)
-        gap = self.tag_spacing * self.spacing_m
-        return (-gap, self.cols * self.tag_pitch_m, -gap, self.rows * self.tag_pitch_m)
-
-    def sheet_bounds_m(self) -> tuple[float, float, float, float]:
-        """(x0, x1, y0, y1) of the white sheet the pattern is printed on."""
-        if self.margin_m is not None:
-            m = float(self.margin_m)
-        else:
-            m = {"checkerboard": self.spacing_m, "circlegrid": self.spacing_m,
-                 "aprilgrid": 0.5 * self.spacing_m}[self.kind]
-        x0, x1, y0, y1 = self.pattern_bounds_m()
-        return (x0 - m, x1 + m, y0 - m, y1 + m)
-
-    def center_m(self) -> np.ndarray:
-        pts = self.points()
-        return 0.5 * (pts.min(axis=0) + pts.max(axis=0))
-
-    def kalibr_dict(self) -> dict:
-        """Kalibr's target YAML fields."""
-        if self.kind == "checkerboard":
-            return {"target_type": "checkerboard", "targetCols": int(self.cols), "targetRows": int(self.rows),
-                    "rowSpacingMeters": float(self.row_pitch_m), "colSpacingMeters": float(self.spacing_m)}
-        if self.kind == "circlegrid":
-            return {"target_type": "circlegrid", "targetCols": int(self.cols), "targetRows": int(self.rows),
-                    "spacingMeters": float(self.spacing_m), "asymmetricGrid": bool(self.asymmetric)}
-        return {"target_type": "aprilgrid", "tagCols": int(self.cols), "tagRows": int(self.rows),
-                "tagSize": float(self.spacing_m), "tagSpacing": float(self.tag_spacing)}
-
-    def to_dict(self) -> dict:
-        """Kalibr fields plus the drawing details (for truth.json)."""
-        d = self.kalibr_dict()
-        d.update({"sheet_bounds_m": list(self.sheet_bounds_m()), "reflectance_black": BLACK,
-                  "reflectance_white": WHITE, "reflectance_background": BACKGROUND})
-        if self.kind == "circlegrid":
-            d["circle_radius_m"] = self.radius_m
-        if self.kind == "aprilgrid":
-            d["tag_family"] = "36h11 (cv2.aruco.DICT_APRILTAG_36h11), 2-cell black border (markerBorderBits=2)"
-            d["tag_drawing"] = ("cv2.aruco marker image rotated by 180 degrees, its top towards target +y "
-                                "(as Kalibr's kalibr_create_target_pdf draws tags, rotation=2)")
-            d["aruco_corner_point_ids"] = _aruco_corner_point_ids(self).tolist()
-        return d
-
-    # -- texture --------------------------------------------------------------------------------
-    def albedo(self, x: np.ndarray, y: np.ndarray, wx: np.ndarray, wy: np.ndarray) -> np.ndarray:
-        """Reflectance at target points (x, y), box-filtered over a footprint of wx × wy metres.
-
-        Points off the sheet see the background; NaN coordinates count as off the sheet.
-        """
-        if self.kind == "circlegrid":
-            return self._circles(x, y, wx, wy)
-        return self._texture().filtered(x, y, wx, wy)
-
-    def _sheet_cover(self, x, y, wx, wy) -> np.ndarray:
-        """Box-filtered indicator of the white sheet."""
-        x0, x1, y0, y1 = self.sheet_bounds_m()
-        return (_ramp((x - x0) / wx) * _ramp((x1 - x) / wx)) * (_ramp((y - y0) / wy) * _ramp((y1 - y) / wy))
-
-    def _circles(self, x, y, wx, wy) -> np.ndarray:
-        s, rad = self.spacing_m, self.radius_m
-        width = 0.5 * (wx + wy)
-        cover = np.zeros(np.shape(x), dtype=np.result_type(x))
-        # Nearest circle: in a symmetric grid the rounded lattice cell; in an asymmetric grid it can
-        # sit in either neighbouring row, so take the larger coverage of the two (discs do not overlap).
-        if self.asymmetric:
-            base = np.floor(y / s)
-            candidates = (base, base + 1)
-        else:
-            candidates = (np.round(y / s),)
-        for r in candidates:
-            r = np.clip(np.nan_to_num(r, nan=-1e6), 0, self.rows - 1)
-            shift = (r % 2) if self.asymmetric else 0.0
-            step = 2.0 if self.asymmetric else 1.0
-            c = np.clip(np.round((x / s - shift) / step), 0, self.cols - 1)
-            cx, cy = (step * c + shift) * s, r * s
-            dist = np.hypot(x - cx, y - cy)
-            cover = np.maximum(cover, _ramp((rad - dist) / width))
-        paper = WHITE - (WHITE - BLACK) * cover
-        sheet = np.nan_to_num(self._sheet_cover(x, y, wx, wy))
-        return sheet * paper + (1.0 - sheet) * BACKGROUND
-
-    def _texture(self) -> _RectilinearTexture:
-        """The pattern as a table of constant cells between its x and y edges (built once)."""
-        texture = _TEXTURE_CACHE.get(self)
-        if texture is not None:
-            return texture
-        sx0, sx1, sy0, sy1 = self.sheet_bounds_m()
-        if self.kind == "checkerboard":
-            xs = np.arange(-1, self.cols + 1) * self.spacing_m
-            ys = np.arange(-1, self.rows + 1) * self.row_pitch_m
-        else:
-            pitch, size = self.tag_pitch_m, self.spacing_m
-            cells = np.arange(TAG_CELLS + 1) * size / TAG_CELLS
-            gap = self.tag_spacing * size
-
-            def axis(n: int) -> np.ndarray:
-                tags = (np.arange(n)[:, None] * pitch + cells[None]).ravel()
-                return np.concatenate([tags, np.arange(n + 1) * pitch - gap, np.arange(n + 1) * pitch])
-
-            xs, ys = axis(self.cols), axis(self.rows)
-        # Edges closer than 1 nm are one edge (floating-point copies of the same line).
-        xs, ys = (_merge_close(np.r_[a, lo, hi]) for a, lo, hi in ((xs, sx0, sx1), (ys, sy0, sy1)))
-        texture = _RectilinearTexture(xs, ys, self._lookup)
-        _TEXTURE_CACHE[self] = texture
-        return texture
-
-    def _lookup(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Unfiltered reflectance at (x, y) (piecewise constant between the breakpoints)."""
-        sx0, sx1, sy0, sy1 = self.sheet_bounds_m()
-        on_sheet = (x >= sx0) & (x < sx1) & (y >= sy0) & (y < sy1)
-        out = np.where(on_sheet, WHITE, BACKGROUND)
-        if self.kind == "checkerboard":
-            i = np.floor(x / self.spacing_m)
-            j = np.floor(y / self.row_pitch_m)
-            inside = (i >= -1) & (i <= self.cols - 1) & (j >= -1) & (j <= self.rows - 1)
-            # Square (i, j) is black when i + j is even: the squares at the pattern's top-left and
-            # around the origin corner diagonally are black.
-            black = inside & ((i + j) % 2 == 0)
-            return np.where(black, BLACK, out)
-        pitch, size = self.tag_pitch_m, self.spacing_m
-        i = np.floor(x / pitch)
-        j = np.floor(y / pitch)
-        lx, ly = x - i * pitch, y - j * pitch
-        in_tag = (lx < size) & (ly < size) & (i >= 0) & (i < self.cols) & (j >= 0) & (j < self.rows)
-        square = (lx >= size) & (ly >= size) & (i >= -1) & (i < self.cols) & (j >= -1) & (j < self.rows)
-        bits = _tag_bits(self.cols * self.rows)
-        tag_id = np.where(in_tag, j * self.cols + i, 0).astype(np.int64)
-        n = TAG_CELLS
-        col = np.clip(np.floor(lx / size * n), 0, n - 1).astype(np.int64)
-        row = np.clip(n - 1 - np.floor(ly / size * n), 0, n - 1).astype(np.int64)  # image row 0 at the top (+y)
-        tag_value = np.where(bits[tag_id, row, col], WHITE, BLACK)
-        out = np.where(in_tag, tag_value, out)
-        return np.where(square, BLACK, out)
-
-
-_TEXTURE_CACHE: dict = {}
-_TAG_BITS_CACHE: dict = {}
-
-
-def _tag_bits(count: int) -> np.ndarray:
-    """(count, 10, 10) bool: white cells of 36h11 tags 0..count-1 as drawn on the target.
-
-    cv2.aruco's marker image with Kalibr's 2-cell black border around the 6x6 data, rotated by
-    180° as kalibr_create_target_pdf draws its tags (np.rot90(code, 2)); row 0 = top of the printed
-    tag. (Checked against a real EuRoC AprilGrid frame: same border, same corner order.)
-    """
-    bits = _TAG_BITS_CACHE.get(count)
-    if bits is None:
-        dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
-        bits = np.stack([np.rot90(dictionary.generateImageMarker(k, TAG_CELLS, borderBits=TAG_BORDER_BITS) > 127, 2)
-                         for k in range(count)])
-        _TAG_BITS_CACHE[count] = bits
-    return bits
-
-
-def _aruco_corner_point_ids(target: RenderTarget) -> np.ndarray:
-    """(tags, 4) target point ids of cv2.aruco's corners 0..3 (the marker image's top-left,
-    top-right, bottom-right, bottom-left) for each tag as drawn by :meth:`RenderTarget._lookup`."""
-    # Marker image corner (col, row) in cell units, rotated by 180° then placed with row 0 at +y:
-    # image corner (a, b) (0 or 1: left/right, top/bottom) lands at tag-local x = (1 - a) size,
-    # y = b size.
-    ids = np.zeros((target.rows * target.cols, 4), dtype=np.int64)
-    for k in range(target.rows * target.cols):
-        j, i = divmod(k, target.cols)
-        for n, (a, b) in enumerate([(0, 0), (1, 0), (1, 1), (0, 1)]):
-            cx, cy = 1 - a, b      # 0 = low side, 1 = high side of the tag
-            ids[k, n] = (2 * j + cy) * 2 * target.cols + 2 * i + cx
-    return ids
-
-
-def _merge_close(values: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-    v = np.sort(values)
-    return v[np.r_[True, np.diff(v) > tol]]
-
-
-class _RectilinearTexture:
-    """A piecewise-constant texture whose edges are the lines x = xs[k] and y = ys[k].
-
-    Cell (i, j) spans xs[i-1] <= x < xs[i], ys[j-1] <= y < ys[j] (cell 0 and the last cell are
-    unbounded); ``table[i, j]`` is its value. Box filter over a footprint narrower than the smallest
-    cell: only the nearest x edge and the nearest y edge can cross it, so the filtered value is the
-    area-weighted mean of the four cells around their crossing — exact, whatever the pattern.
-    """
-
-    def __init__(self, xs: np.ndarray, ys: np.ndarray, lookup: Callable) -> None:
-        self.xs, self.ys = xs, ys
-
-        def centres(b: np.ndarray) -> np.ndarray:
-            return np.r_[b[0] - 1.0, 0.5 * (b[:-1] + b[1:]), b[-1] + 1.0]
-
-        cx, cy = centres(xs), centres(ys)
-        self.table = lookup(cx[:, None] + 0 * cy[None], 0 * cx[:, None] + cy[None]).astype(np.float32)
-        self._flat = self.table.ravel()
-        self._xs32, self._ys32 = xs.astype(np.float32), ys.astype(np.float32)  # same dtype as the samples
-        self._stride = self.table.shape[1]
-
-    @staticmethod
-    def _nearest_edge(edges: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Index k of the nearest edge and its coordinate."""
-        i = np.searchsorted(edges, x)
-        lo = np.clip(i - 1, 0, len(edges) - 1)
-        hi = np.clip(i, 0, len(edges) - 1)
-        k = np.where(np.abs(x - edges[lo]) < np.abs(edges[hi] - x), lo, hi)
-        return k, edges[k]
-
-    def filtered(self, x: np.ndarray, y: np.ndarray, wx: np.ndarray, wy: np.ndarray) -> np.ndarray:
-        kx, bx = self._nearest_edge(self._xs32 if x.dtype == np.float32 else self.xs, x)
-        ky, by = self._nearest_edge(self._ys32 if y.dtype == np.float32 else self.ys, y)
-        ax = _ramp((bx - x) / wx)  # share of the footprint in cell kx (below the edge), rest in kx + 1
-        ay = _ramp((by - y) / wy)
-        base = kx * self._stride + ky
-        t = self._flat
-        low_x = ay * t[base] + (1.0 - ay) * t[base + 1]
-        high_x = ay * t[base + self._stride] + (1.0 - ay) * t[base + self._stride + 1]
-        value = ax * low_x + (1.0 - ax) * high_x
-        return np.where(np.isfinite(value), value, BACKGROUND)
-
-
-# --------------------------------------------------------------------------------------------------
-# Camera and trajectory
-
-
-def default_camera(size: Sequence[int] = (640, 480), model: str = "pinhole-radtan") -> CameraModel:
-    """simulate.simulate_default's camera (640x480, f = 500 px, k1 = -0.1, k2 = 0.05), with the focal
-    length scaled by width / 640 for other sizes and the principal point at the image centre.
-    ``pinhole-equidistant`` gives a fisheye-model camera with the same f and mild k1..k4."""
-    width, height = int(size[0]), int(size[1])
-    f = 500.0 * width / 640.0
-    cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
-    if model == "pinhole-radtan":
-        return CameraModel(model, [f, f, cx, cy, -0.1, 0.05, 0.0, 0.0, 0.0], width, height)
-    if model == "pinhole-equidistant":
-        return CameraModel(model, [f, f, cx, cy, -0.02, 0.01, 0.0, 0.0], width, height)
-    raise InputError(f"unknown camera model {model!r} (pinhole-radtan, pinhole-equidistant)")
-
-
-class TargetFlippedTrajectory:
-    """A trajectory expressed in a target frame turned by 180° about x (x_v = x, y_v = -y, z_v = -z).
-
-    Kalibr's AprilGrid frame has y up the printed page, so the printed side faces +z; the hand-held
-    trajectory looks from -z. Composing with this fixed rotation keeps the camera on the printed side.
-    """
-
-    _FLIP = np.diag([1.0, -1.0, -1.0])
-
-    def __init__(self, base: Any) -> None:
-        self.base = base
-
-    def pose_cw(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        R, p = self.base.pose_cw(t_s)
-        return R @ self._FLIP, p
-
-    def __getattr__(self, name: str) -> Any:  # duration_s, seed, ... of the base trajectory
-        if name == "base":  # not yet set (copy, unpickling): no recursion
-            raise AttributeError(name)
-        return getattr(self.base, name)
-
-
-def default_trajectory(camera: CameraModel, target: RenderTarget, duration_s: float, seed: int = 0,
-                       motion: float = 1.0) -> Any:
-    """simulate.HandheldTrajectory looking at the target centre from the stand-off at which the
-    target fills about half the image; ``motion`` scales its amplitude (0 = static camera)."""
-    pts = target.points()
-    center = target.center_m()
-    distance = standoff_distance_m(camera, pts)
-    if target.kind == "aprilgrid":
-        center = center * np.array([1.0, -1.0, 1.0])
-        return TargetFlippedTrajectory(HandheldTrajectory(duration_s=duration_s, seed=seed, amplitude=motion,
-                                                          target_center_m=center, distance_m=distance))
-    return HandheldTrajectory(duration_s=duration_s, seed=seed, amplitude=motion, target_center_m=center,
-                              distance_m=distance)
-
-
-def _trajectory_description(trajectory: Any) -> dict:
-    """Enough to rebuild a default trajectory (see :func:`trajectory_from_truth`)."""
-    flipped = isinstance(trajectory, TargetFlippedTrajectory)
-    base = trajectory.base if flipped else trajectory
-    if type(base) is not HandheldTrajectory or base.amplitude_profile is not None:
-        return {"type": type(base).__name__}
-    return {"type": "HandheldTrajectory", "flip_target_x180": flipped, "seed": base.seed,
-            "duration_s": base.duration_s, "amplitude": base.amplitude,
-            "target_center_m": base.target_center_m.tolist(), "distance_m": base.distance_m}
-
-
-def trajectory_from_truth(truth: dict) -> Any:
-    """Rebuild the analytic trajectory recorded in a truth.json (default trajectories only)."""
-    d = truth.get("trajectory", {})
-    if d.get("type") != "HandheldTrajectory":
-        raise InputError("truth.json: the trajectory is not a default HandheldTrajectory; use its samples")
-    base = HandheldTrajectory(duration_s=d["duration_s"], seed=d["seed"], amplitude=d["amplitude"],
-                              target_center_m=d["target_center_m"], distance_m=d["distance_m"])
-    return TargetFlippedTrajectory(base) if d.get("flip_target_x180") else base
 
 
 # --------------------------------------------------------------------------------------------------
@@ -524,7 +66,10 @@ class RollingShutterRenderer:
     """Renders frames of a rolling-shutter camera moving along ``trajectory`` in front of ``target``.
 
     camera:            rscalib.CameraModel (its unprojection maps every sub-pixel to a ray, once).
-    trajectory:        anything with ``pose_cw(t) -> (R (n,3,3), p (n,3))``, vectorised over t.
+    target:            a Target (drawn by its default TargetTexture), a TargetTexture, a built-in
+                       target name or a target YAML path.
+    trajectory:        a :class:`~rscalib.sim.trajectories.Trajectory` (``pose_cw(t) -> (R (n,3,3),
+                       p (n,3))``, vectorised over t).
     line_delay_s:      d; row v (continuous, px) starts exposure at t_i + v d.
     supersample:       n × n sub-pixel samples per pixel, each at its own sub-row time.
     exposure_s:        exposure per row; 0 = instantaneous.
@@ -535,7 +80,8 @@ class RollingShutterRenderer:
     workers:           threads over row blocks (numpy releases the GIL); default min(4, cpus).
     """
 
-    def __init__(self, camera: CameraModel, target: RenderTarget, trajectory: Any, line_delay_s: float,
+    def __init__(self, camera: CameraModel, target: Union[Target, TargetTexture, str, Path], trajectory: Trajectory,
+                 line_delay_s: float,
                  supersample: int = 3, exposure_s: float = 0.0, exposure_samples: Optional[int] = None,
                  intensity_modulation: Optional[Callable[[np.ndarray], np.ndarray]] = None,
                  workers: Optional[int] = None, block_rows: Optional[int] = None) -> None:
@@ -546,7 +92,8 @@ class RollingShutterRenderer:
         if exposure_samples is not None and int(exposure_samples) < 1:
             raise InputError("exposure samples must be >= 1")
         self.camera = camera
-        self.target = target
+        self.texture = texture_of(target)
+        self.target = self.texture.target
         self.trajectory = trajectory
         self.line_delay_s = float(line_delay_s)
         self.supersample = int(supersample)
@@ -557,7 +104,7 @@ class RollingShutterRenderer:
         self.workers = max(1, int(workers if workers is not None else min(4, os.cpu_count() or 1)))
         # ~100k samples per block keeps the temporaries in cache-friendly sizes.
         self.block_rows = int(block_rows or max(1, 100_000 // (self.width * self.supersample ** 2)))
-        self._points = target.points()
+        self._points = self.target.points_m
         self._K, self._dist = opencv_matrices(camera)
         self._rays = self._ray_grid()
         self._pool = ThreadPoolExecutor(self.workers) if self.workers > 1 else None
@@ -618,7 +165,7 @@ class RollingShutterRenderer:
         (NaN where not projectable): the fixed point v = v_proj(T_cw(t + v d + offset) P)."""
         d = self.line_delay_s if line_delay_s is None else float(line_delay_s)
         pts = self._points
-        shifted = _ShiftedTrajectory(self.trajectory, time_offset_s)
+        shifted = ShiftedTrajectory(self.trajectory, time_offset_s)
         uv, valid = rs_projection(shifted, self.camera.model, self._K, self._dist, pts,
                                    np.full(len(pts), float(t_frame_s)), d)
         uv = uv.copy()
@@ -683,7 +230,7 @@ class RollingShutterRenderer:
             wy = _abs_diff(y, 1) + _abs_diff(y, 0)
             wx = np.where(np.isfinite(wx), wx, np.float32(1.0)) + np.float32(1e-9)
             wy = np.where(np.isfinite(wy), wy, np.float32(1.0)) + np.float32(1e-9)
-            return self.target.albedo(x, y, wx, wy)
+            return self.texture.albedo(x, y, wx, wy)
 
 
 def _abs_diff(a: np.ndarray, axis: int) -> np.ndarray:
@@ -693,16 +240,6 @@ def _abs_diff(a: np.ndarray, axis: int) -> np.ndarray:
         return np.zeros_like(a)
     last = d[-1:] if axis == 0 else d[:, -1:]
     return np.concatenate([d, last], axis=axis)
-
-
-class _ShiftedTrajectory:
-    """``pose_cw(t + offset)``: projections at a fixed time into the exposure."""
-
-    def __init__(self, base: Any, offset_s: float) -> None:
-        self.base, self.offset_s = base, float(offset_s)
-
-    def pose_cw(self, t_s):
-        return self.base.pose_cw(np.asarray(t_s, dtype=np.float64) + self.offset_s)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -720,8 +257,8 @@ class RenderedVideo:
     camera_path: Path
     target_path: Path
     camera: CameraModel
-    target: RenderTarget
-    trajectory: Any
+    target: Target
+    trajectory: Trajectory
     line_delay_s: float
     fps: float
     frame_times_s: np.ndarray
@@ -739,14 +276,17 @@ class RenderedVideo:
 
     def uv_rs(self) -> np.ndarray:
         """(frames, points, 2) exact rolling-shutter projections (NaN where not visible)."""
-        return _uv_array(self.truth["projections"]["uv_rs"])
+        return truth_uv(self.truth, "uv_rs")
 
     def uv_gs(self) -> np.ndarray:
         """(frames, points, 2) global-shutter projections (every row at t_i)."""
-        return _uv_array(self.truth["projections"]["uv_gs"])
+        return truth_uv(self.truth, "uv_gs")
 
 
-def _uv_array(nested: list) -> np.ndarray:
+def truth_uv(truth: dict, which: str = "uv_rs") -> np.ndarray:
+    """(frames, points, 2) projections recorded in a truth.json (NaN where not visible): ``uv_rs``
+    (exact rolling shutter), ``uv_gs`` (every row at t_i) or ``uv_rs_mid_exposure``."""
+    nested = truth["projections"][which]
     return np.array([[[np.nan, np.nan] if p is None else p for p in frame] for frame in nested], dtype=np.float64)
 
 
@@ -814,9 +354,9 @@ def _parse_size(size: Union[str, Sequence[int]]) -> tuple[int, int]:
 
 def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
                  size: Union[str, Sequence[int]] = (640, 480),
-                 target: Union[str, RenderTarget, Path] = "checkerboard", duration_s: float = 5.0,
+                 target: Union[str, Path, Target, TargetTexture] = "checkerboard", duration_s: float = 5.0,
                  exposure_s: float = 0.0, noise: float = 2.0, seed: int = 0, *,
-                 camera: Optional[CameraModel] = None, trajectory: Any = None, motion: float = 1.0,
+                 camera: Optional[CameraModel] = None, trajectory: Optional[Trajectory] = None, motion: float = 1.0,
                  supersample: int = 3, exposure_samples: Optional[int] = None, video: bool = True,
                  frames_dir: Union[None, bool, str, Path] = None, codec: str = "auto",
                  intensity_modulation: Optional[Callable[[np.ndarray], np.ndarray]] = None,
@@ -832,8 +372,8 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
 
     line_delay_s: d (s/row), |d|·rows must fit in a frame period. fps, duration_s: frames at
         t_i = i / fps for i < floor(duration·fps). size: (w, h) or "WxH" for the default camera
-        (:func:`default_camera`); ignored when ``camera`` is given. target: name
-        (:meth:`RenderTarget.named`), Kalibr YAML path or RenderTarget. exposure_s: per-row
+        (:func:`~rscalib.sim.target_observations.default_camera`); ignored when ``camera`` is given.
+        target: built-in name (:meth:`Target.named`), Kalibr YAML path, Target or TargetTexture. exposure_s: per-row
         exposure (motion blur), ≤ 1/fps. noise: σ of Gaussian intensity noise in 8-bit grey levels.
         seed: the default trajectory and the noise. motion: amplitude of the default hand-held
         trajectory. trajectory: anything with a vectorised ``pose_cw(t)``, overriding the default.
@@ -878,12 +418,13 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
     if abs(line_delay_s) * camera.height > 1.0 / fps:
         raise InputError(f"readout time {abs(line_delay_s) * camera.height * 1e3:.3g} ms (line delay x "
                          f"{camera.height} rows) exceeds the frame period {1e3 / fps:.3g} ms")
-    target = RenderTarget.parse(target)
+    texture = texture_of(target)
+    target = texture.target
     num_frames = int(math.floor(duration_s * fps + 1e-9))
     if num_frames < 1:
         raise InputError(f"duration {duration_s} s at {fps} fps gives no frame")
     if trajectory is None:
-        trajectory = default_trajectory(camera, target, duration_s, seed, motion)
+        trajectory = target_trajectory(camera, target, duration_s, seed, motion)
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -899,7 +440,7 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
     if video:
         writer, video_path, used_codec = _open_writer(out_dir / Path(VIDEO_NAME).stem, fps,
                                                       (camera.width, camera.height), codec)
-    renderer = RollingShutterRenderer(camera, target, trajectory, line_delay_s, supersample=supersample,
+    renderer = RollingShutterRenderer(camera, texture, trajectory, line_delay_s, supersample=supersample,
                                       exposure_s=exposure_s, exposure_samples=exposure_samples,
                                       intensity_modulation=intensity_modulation, workers=workers)
     uv_rs, uv_gs, uv_mid = [], [], []
@@ -925,8 +466,6 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
     if frames_dir is not None:
         (frames_dir / "timestamps.txt").write_text("".join(f"{t:.9f}\n" for t in frame_times))
 
-    from ..io.cameras import write_opencv_yaml
-
     camera_path = out_dir / "camera.yaml"
     write_opencv_yaml(camera, camera_path, line_delay_s=line_delay_s)
     target_path = out_dir / "target.yaml"
@@ -951,8 +490,8 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
         "image_size": [int(camera.width), int(camera.height)],
         "camera": {"model": camera.model, "params": [float(v) for v in camera.params],
                    "width": int(camera.width), "height": int(camera.height)},
-        "target": target.to_dict(),
-        "target_points_m": target.points().tolist(),
+        "target": texture.describe(),
+        "target_points_m": target.points_m.tolist(),
         "noise_grey_levels": float(noise),
         "exposure_s": float(exposure_s),
         "exposure_samples": exposure_samples,
@@ -965,7 +504,7 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
         "video": None if video_path is None else {"file": video_path.name, "codec": used_codec,
                                                   "frame_timestamps": "frame i at i / fps"},
         "frames_dir": None if frames_dir is None else str(frames_dir),
-        "trajectory": _trajectory_description(trajectory),
+        "trajectory": _describe(trajectory),
         "poses_at_frames": _pose_samples(trajectory, frame_times),
         "poses_dense": dict(_pose_samples(trajectory, dense_times), rate_hz=float(dense_rate_hz)),
         "projections": projections,
@@ -977,6 +516,12 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
                          camera_path=camera_path, target_path=target_path, camera=camera, target=target,
                          trajectory=trajectory, line_delay_s=float(line_delay_s), fps=float(fps),
                          frame_times_s=frame_times, truth=truth, render_seconds=render_seconds, codec=used_codec)
+
+
+def _describe(trajectory: Trajectory) -> dict:
+    """truth.json's "trajectory": its own description (enough to rebuild a default one)."""
+    describe = getattr(trajectory, "describe", None)
+    return describe() if callable(describe) else {"type": type(trajectory).__name__}
 
 
 def _compact_json(data: dict) -> str:
@@ -993,3 +538,11 @@ def load_truth(path) -> dict:
     if not path.is_file():
         raise InputError(f"truth file not found: {path}")
     return json.loads(path.read_text())
+
+
+def trajectory_from_truth(truth: dict) -> Trajectory:
+    """Rebuild the analytic trajectory recorded in a truth.json (default trajectories only)."""
+    try:
+        return trajectory_from_description(truth.get("trajectory", {}))
+    except InputError as error:
+        raise InputError(f"truth.json: {error}") from None

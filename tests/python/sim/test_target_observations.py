@@ -12,13 +12,12 @@ import pytest
 
 from rscalib.observations import Observations
 from rscalib.sim.target_observations import (
-    HandheldTrajectory,
     SimCamera,
-    calm_then_wild,
     checkerboard_points,
     simulate_default,
     simulate_observations,
 )
+from rscalib.sim.trajectories import HandheldTrajectory, calm_then_wild
 
 RADTAN = SimpleNamespace(model="pinhole-radtan",
                          params=np.array([500.0, 505.0, 319.5, 239.5, -0.1, 0.05, 1e-3, -5e-4, 0.0]),
@@ -205,7 +204,7 @@ def test_default_motion_is_hand_like_and_keeps_target_in_view():
     assert o.num_observations > 0.9 * 450 * 54
     speed, _ = image_speed_px_s(sim)
     assert 100 < np.median(speed) < 1000
-    w = np.linalg.norm(sim.trajectory.angular_velocity_c(np.arange(0, 15, 0.01)), axis=1)
+    w = np.linalg.norm(sim.trajectory.velocities(np.arange(0, 15, 0.01))[1], axis=1)
     assert np.degrees(np.median(w)) > 10
 
 
@@ -219,43 +218,6 @@ def test_calm_then_wild_profile_concentrates_motion_in_second_half():
     wild = np.median(speed[t > 0.6 * duration_s])
     assert wild > 3.0 * calm, (calm, wild)
     assert calm > 0  # calm, not frozen
-
-
-def test_trajectory_is_smooth():
-    traj = HandheldTrajectory(duration_s=10.0, seed=9, amplitude_profile=calm_then_wild(10.0))
-    second_diffs = []
-    for dt in (2e-3, 1e-3):
-        t = np.arange(0.0, 10.0, dt)
-        R, p = traj.pose_cw(t)
-        x = np.concatenate([R.reshape(len(t), 9), p], axis=1)
-        assert np.all(np.isfinite(x))
-        np.testing.assert_allclose(np.einsum("nij,nkj->nik", R, R), np.broadcast_to(np.eye(3), R.shape),
-                                   atol=1e-12)
-        np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-12)
-        first = np.max(np.abs(np.diff(x, axis=0)))
-        second = np.max(np.abs(np.diff(x, n=2, axis=0)))
-        assert first < 5.0 * dt  # bounded velocity: no jumps
-        assert second < 200.0 * dt ** 2  # bounded acceleration: no kinks
-        second_diffs.append(second)
-    # Smooth functions: second differences scale as dt^2 (a kink would make them scale as dt).
-    assert second_diffs[0] / second_diffs[1] == pytest.approx(4.0, rel=0.05)
-
-
-def test_pose_derivative_matches_pose():
-    traj = HandheldTrajectory(duration_s=5.0, seed=2)
-    t = np.linspace(0.3, 4.7, 25)
-    dR, dp = traj.pose_cw_derivative(t)
-    R1, p1 = traj.pose_cw(t + 1e-3)
-    R0, p0 = traj.pose_cw(t - 1e-3)
-    np.testing.assert_allclose(dp, (p1 - p0) / 2e-3, atol=1e-4)
-    np.testing.assert_allclose(dR, (R1 - R0) / 2e-3, atol=1e-4)
-    # Angular velocity: R(t + h) ~ exp(-[w] h) R(t).
-    w = traj.angular_velocity_c(t)
-    R, _ = traj.pose_cw(t)
-    Rh, _ = traj.pose_cw(t + 1e-6)
-    rel = np.einsum("nij,nkj->nik", Rh, R)  # exp(-[w] h)
-    w_fd = -np.stack([rel[:, 2, 1], rel[:, 0, 2], rel[:, 1, 0]], axis=1) / 1e-6
-    np.testing.assert_allclose(w, w_fd, atol=1e-4)
 
 
 def test_sim_camera_matches_namespace_camera():

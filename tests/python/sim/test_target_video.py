@@ -2,13 +2,12 @@
 
 The renderer is checked from outside: OpenCV detects the target in the decoded frames, and the
 detections must sit on the exact rolling-shutter projection recorded in truth.json (computed by
-simulate.py's fixed point, not by the renderer) and clearly off the global-shutter projection.
+target_observations.rs_projection's fixed point, not by the renderer) and clearly off the global-shutter projection.
 """
 import json
 import os
 import subprocess
 import sys
-import types
 from pathlib import Path
 
 import cv2
@@ -18,8 +17,11 @@ import yaml
 
 from rscalib.errors import InputError
 from rscalib.io.cameras import load_camera, opencv_matrices
+from rscalib.io.targets import Target, as_target, load_target, target_from_dict
 from rscalib.sim import target_video as render
-from rscalib.sim.target_observations import opencv_project
+from rscalib.sim.target_observations import default_camera, opencv_project
+from rscalib.sim.target_texture import BACKGROUND, TargetTexture
+from rscalib.sim.trajectories import target_trajectory
 
 SCRIPT = Path(sys.executable).parent / ("rscalib.exe" if os.name == "nt" else "rscalib")
 SB_FLAGS = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
@@ -111,9 +113,9 @@ def test_checkerboard_corners_on_exact_rolling_shutter_projection(clip):
 
 
 def test_zero_line_delay_agrees_with_global_shutter():
-    camera = render.default_camera((640, 480))
-    target = render.RenderTarget.named("checkerboard")
-    trajectory = render.default_trajectory(camera, target, 2.0, seed=4, motion=1.5)
+    camera = default_camera((640, 480))
+    target = Target.named("checkerboard")
+    trajectory = target_trajectory(camera, target, 2.0, seed=4, motion=1.5)
     rng = np.random.default_rng(1)
     errors = []
     with render.RollingShutterRenderer(camera, target, trajectory, 0.0, supersample=2) as renderer:
@@ -128,7 +130,7 @@ def test_zero_line_delay_agrees_with_global_shutter():
 
 
 def test_truth_projection_is_the_rolling_shutter_fixed_point(clip):
-    """Independent of simulate.py: re-project each point at its own row time with OpenCV."""
+    """Independent of rs_projection: re-project each point at its own row time with OpenCV."""
     rendered, _, _, _ = clip
     truth = rendered.truth
     trajectory = render.trajectory_from_truth(truth)
@@ -152,9 +154,9 @@ def test_truth_projection_is_the_rolling_shutter_fixed_point(clip):
     ("acircles", (4, 11), cv2.CALIB_CB_ASYMMETRIC_GRID),
 ])
 def test_circle_grids_detected_on_rolling_shutter_projection(name, pattern, flags):
-    camera = render.default_camera((640, 480))
-    target = render.RenderTarget.named(name)
-    trajectory = render.default_trajectory(camera, target, 2.0, seed=4, motion=1.5)
+    camera = default_camera((640, 480))
+    target = Target.named(name)
+    trajectory = target_trajectory(camera, target, 2.0, seed=4, motion=1.5)
     rng = np.random.default_rng(2)
     err_rs, err_gs = [], []
     with render.RollingShutterRenderer(camera, target, trajectory, LINE_DELAY_S, supersample=2) as renderer:
@@ -172,10 +174,11 @@ def test_circle_grids_detected_on_rolling_shutter_projection(name, pattern, flag
 
 
 def test_aprilgrid_tags_decode_with_the_recorded_corner_ids():
-    camera = render.default_camera((640, 480))
-    target = render.RenderTarget.named("aprilgrid")
-    trajectory = render.default_trajectory(camera, target, 1.0, seed=3, motion=0.0)
-    corner_ids = np.asarray(target.to_dict()["aruco_corner_point_ids"])
+    camera = default_camera((640, 480))
+    target = Target.named("aprilgrid")
+    trajectory = target_trajectory(camera, target, 1.0, seed=3, motion=0.0)
+    corner_ids = target.aruco_corner_ids()
+    assert TargetTexture(target).describe()["aruco_corner_point_ids"] == corner_ids.tolist()  # truth.json
     with render.RollingShutterRenderer(camera, target, trajectory, LINE_DELAY_S, supersample=2) as renderer:
         grey = render.to_uint8(renderer.render(0.0), 1.0, np.random.default_rng(3))
         uv = renderer.project_rs(0.0)
@@ -194,9 +197,9 @@ def test_aprilgrid_tags_decode_with_the_recorded_corner_ids():
 
 
 def test_motion_blur_centroid_is_mid_exposure():
-    camera = render.default_camera((640, 480))
-    target = render.RenderTarget.named("checkerboard")
-    trajectory = render.default_trajectory(camera, target, 2.0, seed=4, motion=1.5)
+    camera = default_camera((640, 480))
+    target = Target.named("checkerboard")
+    trajectory = target_trajectory(camera, target, 2.0, seed=4, motion=1.5)
     exposure_s = 0.004
     err_mid, err_start = [], []
     with render.RollingShutterRenderer(camera, target, trajectory, LINE_DELAY_S, supersample=1,
@@ -213,9 +216,9 @@ def test_motion_blur_centroid_is_mid_exposure():
 
 
 def test_equidistant_lens():
-    camera = render.default_camera((640, 480), "pinhole-equidistant")
-    target = render.RenderTarget.named("checkerboard")
-    trajectory = render.default_trajectory(camera, target, 1.0, seed=4, motion=1.0)
+    camera = default_camera((640, 480), "pinhole-equidistant")
+    target = Target.named("checkerboard")
+    trajectory = target_trajectory(camera, target, 1.0, seed=4, motion=1.0)
     with render.RollingShutterRenderer(camera, target, trajectory, LINE_DELAY_S, supersample=2) as renderer:
         grey = render.to_uint8(renderer.render(0.2), 1.0, np.random.default_rng(5))
         ok, corners = cv2.findChessboardCornersSB(grey, (9, 6), flags=SB_FLAGS)
@@ -224,9 +227,9 @@ def test_equidistant_lens():
 
 
 def test_intensity_modulation_hook_acts_per_row_time():
-    camera = render.default_camera((160, 120))
-    target = render.RenderTarget.named("checkerboard")
-    trajectory = render.default_trajectory(camera, target, 1.0, motion=0.0)
+    camera = default_camera((160, 120))
+    target = Target.named("checkerboard")
+    trajectory = target_trajectory(camera, target, 1.0, motion=0.0)
     line_delay_s = 100e-6
 
     def flicker(t):
@@ -252,24 +255,49 @@ def test_frames_dir_and_target_file(tmp_path):
     kalibr = yaml.safe_load(rendered.target_path.read_text())
     assert kalibr == {"target_type": "circlegrid", "targetCols": 7, "targetRows": 5, "spacingMeters": 0.04,
                       "asymmetricGrid": False}
-    assert render.RenderTarget.from_file(rendered.target_path) == render.RenderTarget.named("circlegrid")
+    assert load_target(rendered.target_path) == rendered.target == Target.named("circlegrid")
 
 
-def test_target_validation():
+def test_target_validation(tmp_path):
     with pytest.raises(InputError):
-        render.RenderTarget("hexagons")
+        Target.named("nope")
     with pytest.raises(InputError):
-        render.RenderTarget.named("nope")
-    with pytest.raises(InputError):
-        render.RenderTarget.from_kalibr({"target_type": "checkerboard", "targetCols": 9})
-    # rscalib.io.targets.Target (or anything with target_type + Kalibr spec) converts.
-    duck = types.SimpleNamespace(target_type="checkerboard", spec={"targetCols": 7, "targetRows": 5,
-                                                                   "rowSpacingMeters": 0.03, "colSpacingMeters": 0.02})
-    assert render.RenderTarget.parse(duck) == render.RenderTarget("checkerboard", 7, 5, 0.02, 0.03)
-    april = render.RenderTarget.named("aprilgrid")
-    assert len(april.points()) == 4 * 36
+        target_from_dict({"target_type": "checkerboard", "targetCols": 9})
+    charuco = target_from_dict({"target_type": "charuco", "squaresX": 5, "squaresY": 4, "squareLength": 0.04,
+                                "markerLength": 0.03})
+    with pytest.raises(InputError, match="cannot be rendered"):
+        TargetTexture(charuco)
+    with pytest.raises(InputError, match="circle radius"):
+        TargetTexture(Target.named("circlegrid"), circle_radius_m=0.03)
+    # A Target, a built-in name or a Kalibr YAML path.
+    path = tmp_path / "board.yaml"
+    path.write_text(yaml.safe_dump({"target_type": "checkerboard", "targetCols": 7, "targetRows": 5,
+                                    "rowSpacingMeters": 0.03, "colSpacingMeters": 0.02}))
+    board = as_target(path)
+    assert as_target(str(path)) == board and as_target(board) is board
+    assert as_target("aprilgrid") == Target.named("aprilgrid")
+    texture = TargetTexture(board)
+    assert (texture.cols, texture.rows, texture.spacing_m, texture.row_pitch_m) == (7, 5, 0.02, 0.03)
+    april = Target.named("aprilgrid")
+    assert len(april.points_m) == 4 * 36
     # Kalibr's AprilGrid corner layout: tag 1's lower-left corner is one pitch along x.
-    np.testing.assert_allclose(april.points()[2], [april.tag_pitch_m, 0.0, 0.0])
+    np.testing.assert_allclose(april.points_m[2], [TargetTexture(april).tag_pitch_m, 0.0, 0.0])
+    np.testing.assert_allclose(april.points_m[2], [0.088 * 1.3, 0.0, 0.0])
+
+
+def test_renderer_accepts_a_texture_with_its_own_drawing():
+    camera = default_camera((160, 120))
+    target = Target.named("circlegrid")
+    trajectory = target_trajectory(camera, target, 1.0, motion=0.0)
+    small = TargetTexture(target, circle_radius_m=0.005)
+    no_margin = TargetTexture(target, margin_m=0.0)
+    with render.RollingShutterRenderer(camera, target, trajectory, 0.0, supersample=1) as default, \
+            render.RollingShutterRenderer(camera, small, trajectory, 0.0, supersample=1) as custom, \
+            render.RollingShutterRenderer(camera, no_margin, trajectory, 0.0, supersample=1) as bare:
+        assert custom.target == target
+        plain = default.render(0.0)
+        assert custom.render(0.0).mean() > plain.mean()  # smaller black discs
+        assert np.sum(bare.render(0.0) == BACKGROUND) > np.sum(plain == BACKGROUND)  # less white paper
 
 
 def test_cli_simulate_writes_video_truth_camera_target(tmp_path):
