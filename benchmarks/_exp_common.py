@@ -127,16 +127,13 @@ def bluefox_camera() -> rscalib.CameraModel:
 # -- trajectories -----------------------------------------------------------------------------------
 
 def calm_then_wild_trajectory(camera, target_name: str, duration_s: float, seed: int):
-    """The default hand-held trajectory (render.default_trajectory) with simulate.calm_then_wild's
+    """The default hand-held trajectory (sim.trajectories.target_trajectory) with calm_then_wild's
     amplitude profile: 0.15 of the default amplitude in the first half, 1.0 in the second."""
-    from rscalib.sim.target_observations import HandheldTrajectory, calm_then_wild, standoff_distance_m
-    from rscalib.sim.target_video import RenderTarget
+    from rscalib.io.targets import Target
+    from rscalib.sim.trajectories import calm_then_wild, target_trajectory
 
-    target = RenderTarget.named(target_name)
-    return HandheldTrajectory(duration_s=duration_s, seed=seed, amplitude=1.0,
-                              amplitude_profile=calm_then_wild(duration_s),
-                              target_center_m=target.center_m(),
-                              distance_m=standoff_distance_m(camera, target.points()))
+    return target_trajectory(camera, Target.named(target_name), duration_s, seed, motion=1.0,
+                             amplitude_profile=calm_then_wild(duration_s))
 
 
 # -- videos -----------------------------------------------------------------------------------------
@@ -146,7 +143,8 @@ def get_video(config: str, *, line_delay_s: float, fps: float, duration_s: float
               noise: float = 2.0, supersample: int = 2, motion: float = 1.0, trajectory_kind: str = "handheld",
               workers: Optional[int] = None) -> tuple[Path, float]:
     """Render (or reuse) build/exp_videos/<config>/; returns (folder, render seconds, 0 if cached)."""
-    from rscalib.sim.target_video import default_camera, render_video
+    from rscalib.sim.target_observations import default_camera
+    from rscalib.sim.target_video import render_video
 
     if camera is None:
         camera = default_camera(size)
@@ -260,10 +258,9 @@ class Timer:
 def detection_audit(folder: Path, detection, threshold_px: float = 2.0) -> dict:
     """Detected points vs the exact RS projections in truth.json: median error and the gross
     misdetections (points farther than threshold_px, and the frames holding them)."""
-    from rscalib.sim.target_video import _uv_array, load_truth
+    from rscalib.sim.target_video import load_truth, truth_uv
 
-    truth = load_truth(folder)
-    uv_true = _uv_array(truth["projections"]["uv_rs"])
+    uv_true = truth_uv(load_truth(folder), "uv_rs")
     obs = detection.observations
     frames = np.asarray(detection.frame_numbers)[obs.frame_index]
     err = np.linalg.norm(obs.uv - uv_true[frames, obs.point_id], axis=1)

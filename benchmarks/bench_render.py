@@ -20,7 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
+from rscalib.io.targets import Target
 from rscalib.sim import target_video as render
+from rscalib.sim.target_observations import default_camera
+from rscalib.sim.trajectories import target_trajectory
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common  # noqa: E402
@@ -30,9 +33,9 @@ RESULTS = Path(__file__).resolve().parent / "results" / "bench_render.json"
 
 
 def time_frames(size, supersample, exposure_s, frames, workers, target="checkerboard"):
-    camera = render.default_camera(size)
-    tgt = render.RenderTarget.named(target)
-    trajectory = render.default_trajectory(camera, tgt, 10.0, seed=0)
+    camera = default_camera(size)
+    tgt = Target.named(target)
+    trajectory = target_trajectory(camera, tgt, 10.0, seed=0)
     started = time.perf_counter()
     renderer = render.RollingShutterRenderer(camera, tgt, trajectory, 30e-6, supersample=supersample,
                                              exposure_s=exposure_s, workers=workers)

@@ -20,6 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common  # noqa: E402
 
 from rscalib.sim import scene_video as sr  # noqa: E402
+from rscalib.sim.trajectories import RoomWalkTrajectory  # noqa: E402
 
 
 def main() -> int:
@@ -34,7 +35,7 @@ def main() -> int:
     scene = sr.room_scene(args.seed)
     scene_s = time.perf_counter() - start
     times_s = np.arange(args.frames) / 30.0
-    R, p = sr.RoomWalkTrajectory(seed=args.seed).pose_cw(times_s)
+    R, p = RoomWalkTrajectory(seed=args.seed).pose_cw(times_s)
 
     rows = []
     for supersampling in (2, 3):
