@@ -1,4 +1,4 @@
-"""Self-calibration benchmark (issue 5; SPEC §6): rendered textured-room sequences through the
+"""Self-calibration benchmark (issue 5; docs/benchmarks.md): rendered textured-room sequences through the
 image front end and the SOG bank. Per sequence: error of each parameter, whether the truth is in
 the 99 % bounds, Gaussians left, the frame the bank collapses to one Gaussian, frames/s.
 
@@ -34,7 +34,7 @@ def main() -> None:
         fps_trace = []
         last = [time.perf_counter()]
 
-        def progress(k, bank, fps_trace=fps_trace, last=last):
+        def on_frame(k, bank, report, fps_trace=fps_trace, last=last):
             now = time.perf_counter()
             fps_trace.append((bank.num_gaussians, now - last[0]))
             last[0] = now
@@ -43,7 +43,7 @@ def main() -> None:
         if args.pixel_sigma is not None:
             options.pixel_sigma = args.pixel_sigma
         result = self_calibrate(zip(frames.timestamps_s, frames.images), (frames.camera.width, frames.camera.height),
-                                options=options, progress=progress)
+                                options=options, on_frame=on_frame)
         inside = [bool(result.bounds_99[i, 0] <= truth[i] <= result.bounds_99[i, 1]) for i in range(5)]
         many = [dt for n, dt in fps_trace[1:] if n > 50]
         one = [dt for n, dt in fps_trace[1:] if n == 1]

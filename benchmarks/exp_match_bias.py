@@ -23,27 +23,29 @@ import numpy as np
 from _common import machine_info, write_results
 from exp_sog_vs_single import frames_for
 
-from rscalib.selfcalib import calibrate as selfcalib
+from rscalib.selfcalib.calibrate import self_calibrate
+from rscalib.selfcalib.front_end import FrontEndOptions, ImageFrontEnd
 from rscalib.sim.scene_video import render_scene_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 AGE_BINS = [(1, 5), (5, 15), (15, 40), (40, 100), (100, 10 ** 6)]
 
 
-class _Recorder:
-    """Wraps the bank (to learn each new feature's 3-D point) and the search (to score matches)."""
+class _Recorder(ImageFrontEnd):
+    """The image front end, recording each match's error against the exact projection of the 3-D
+    point under the feature's first pixel (learnt when the bank starts the feature); in mode `exact`
+    the match is replaced by that projection + noise."""
 
-    def __init__(self, truth_frames, camera, mode: str, rng: np.random.Generator):
+    def __init__(self, truth_frames, camera, mode: str, rng: np.random.Generator, image_size):
+        super().__init__(FrontEndOptions(subpixel="parabola" if mode == "parabola" else "affine"), image_size)
         self.truth, self.camera, self.mode, self.rng = truth_frames, camera, mode, rng
         self.frame = -1
         self.points_w: dict[int, tuple[np.ndarray, int]] = {}
         self.errors: list[tuple[int, float, float]] = []   # (age, du, dv)
 
-    def search(self, image, patches, ids, uv_pred, cov, options):
+    def measure(self, image, ids, uv_pred, cov):
         self.frame += 1
-        options = selfcalib.FrontEndOptions(**{**options.__dict__,
-                                               "subpixel": "parabola" if self.mode == "parabola" else "affine"})
-        uv, found = _original_search(image, patches, ids, uv_pred, cov, options)
+        uv, found = super().measure(image, ids, uv_pred, cov)
         for i in np.nonzero(found)[0]:
             known = self.points_w.get(int(ids[i]))
             if known is None:
@@ -57,25 +59,11 @@ class _Recorder:
                 uv[i] = exact + self.rng.normal(0.0, 0.3, 2)
         return uv, found
 
-    def wrap_bank(self, bank):
-        recorder = self
-
-        class Bank:
-            def __getattr__(self, name):
-                return getattr(bank, name)
-
-            def add_features(self, uv):
-                ids = bank.add_features(uv)
-                hits = recorder.truth.surface(recorder.frame, np.asarray(uv))
-                for fid, point in zip(ids, hits.points_w):
-                    recorder.points_w[int(fid)] = (point, recorder.frame)
-                return ids
-
-        return Bank()
-
-
-_original_search = selfcalib.active_search
-_original_make_bank = selfcalib.make_bank
+    def track(self, image, feature_ids, uv):
+        super().track(image, feature_ids, uv)
+        hits = self.truth.surface(self.frame, np.asarray(uv))
+        for fid, point in zip(feature_ids, hits.points_w):
+            self.points_w[int(fid)] = (point, self.frame)
 
 
 def run(seed: int, frames: int, mode: str) -> dict:
@@ -85,14 +73,9 @@ def run(seed: int, frames: int, mode: str) -> dict:
     from rscalib.sim.scene_video import RoomWalkTrajectory
     R, p = RoomWalkTrajectory(seed=seed).pose_cw(times)
     posed.R_cw, posed.p_cw = np.asarray(R), np.asarray(p)
-    recorder = _Recorder(posed, posed.camera, mode, np.random.default_rng([seed, 7]))
-    selfcalib.active_search = recorder.search
-    selfcalib.make_bank = lambda *a, **k: recorder.wrap_bank(_original_make_bank(*a, **k))
-    try:
-        result = selfcalib.self_calibrate(zip(times, images), (images.shape[2], images.shape[1]))
-    finally:
-        selfcalib.active_search = _original_search
-        selfcalib.make_bank = _original_make_bank
+    image_size = (images.shape[2], images.shape[1])
+    recorder = _Recorder(posed, posed.camera, mode, np.random.default_rng([seed, 7]), image_size)
+    result = self_calibrate(zip(times, images), image_size, front_end=recorder)
     err = np.array(recorder.errors)
     by_age = []
     for lo, hi in AGE_BINS:

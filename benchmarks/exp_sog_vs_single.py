@@ -43,8 +43,8 @@ def run_one(times, images, grid) -> dict:
     result = self_calibrate(zip(times, images), (images.shape[2], images.shape[1]), grid=grid)
     return dict(f=float(result.mean[0]), f_bounds_99=result.bounds_99[0].tolist(),
                 mean=result.mean.tolist(), bounds_99=result.bounds_99.tolist(),
-                f_trace=result.history_mean[:, 0].tolist(), f_lo_trace=result.history_bounds[:, 0, 0].tolist(),
-                f_hi_trace=result.history_bounds[:, 0, 1].tolist(), gaussians_left=result.gaussians_left,
+                f_trace=result.history.mean[:, 0].tolist(), f_lo_trace=result.history.bounds_99[:, 0, 0].tolist(),
+                f_hi_trace=result.history.bounds_99[:, 0, 1].tolist(), gaussians_left=result.gaussians_left,
                 collapse_frame=result.collapse_frame, seconds=time.perf_counter() - started)
 
 

@@ -1,45 +1,54 @@
-"""Sequential self-calibration from images (SPEC §4; Civera et al. 2009): the image front end of
-the SOG filter bank — corners where the map is thin, patches stored at initialisation, active
-search by normalised cross-correlation inside each feature's 99 % prediction ellipse — plus the
-result, its history, and the conversion of the civera-radial model to OpenCV's.
-The filter itself is C++ (rscalib._core.SogBank, docs/sog.md)."""
+"""Self-calibration from images (Civera et al. 2009; docs/sog.md): the SOG filter bank (C++,
+rscalib._core.SogBank) over an image sequence through the per-frame loop of
+:mod:`rscalib.selfcalib.driver` with the image front end (:mod:`rscalib.selfcalib.front_end`); the
+result, and the conversion of the civera-radial model to OpenCV's."""
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Optional
+from typing import Any, Callable, Iterable, Iterator, Optional, Union
 
 import cv2
 import numpy as np
 
 from .. import _core
+from .._progress import Progress, ProgressArg
 from ..errors import InputError
-from .front_end import FrontEndOptions, PatchStore, active_search, new_corners
+from ..io.video import open_source
+from .driver import SelfCalibHistory, run_bank
+from .front_end import FrontEndOptions, ImageFrontEnd
 from .prior import PAPER_PIXEL_SIZE_MM, initial_bank, make_bank
+
+__all__ = ["PARAM_NAMES", "GrayFrames", "SelfCalibResult", "civera_to_opencv", "read_gray_frames", "self_calibrate"]
 
 PARAM_NAMES = ("f", "cx", "cy", "k1", "k2")
 
 
 @dataclass
 class SelfCalibResult:
-    """Estimates (moment-matched over the bank), 99 % bounds and the history per frame."""
+    """Estimates (moment-matched over the bank), 99 % bounds, and the history per frame."""
 
     mean: np.ndarray                  # [f, cx, cy, k1 (mm^-2), k2 (mm^-4)]
     bounds_99: np.ndarray             # (5, 2)
     covariance: np.ndarray            # (5, 5)
     image_size: tuple[int, int]
     pixel_size_mm: tuple[float, float]
-    frames_processed: int
     gaussians_initial: int
     gaussians_left: int
-    frames_per_s: float
-    collapse_frame: Optional[int]     # first frame with one Gaussian left
-    history_frame: np.ndarray         # (K,)
-    history_mean: np.ndarray          # (K, 5)
-    history_bounds: np.ndarray        # (K, 5, 2)
-    history_gaussians: np.ndarray     # (K,)
-    history_features: np.ndarray      # (K,) features used in the update
+    history: SelfCalibHistory
     warnings: list = field(default_factory=list)
+
+    @property
+    def frames_processed(self) -> int:
+        return len(self.history)
+
+    @property
+    def frames_per_s(self) -> float:
+        return self.history.frames_per_s
+
+    @property
+    def collapse_frame(self) -> Optional[int]:
+        """The first frame with one Gaussian left (None if more remain)."""
+        return self.history.collapse_frame
 
     def camera(self) -> _core.CameraModel:
         f, cx, cy, k1, k2 = self.mean
@@ -54,105 +63,96 @@ class SelfCalibResult:
                    frames_processed=self.frames_processed, gaussians_initial=self.gaussians_initial,
                    gaussians_left=self.gaussians_left, frames_per_s=self.frames_per_s,
                    collapse_frame=self.collapse_frame, warnings=list(self.warnings),
-                   history={"frame": self.history_frame.tolist(),
-                            "mean": self.history_mean.tolist(),
-                            "bounds_99": self.history_bounds.tolist(),
-                            "gaussians": self.history_gaussians.tolist(),
-                            "features_used": self.history_features.tolist()})
+                   history=self.history.summary_dict())
         return out
+
+
+@dataclass
+class GrayFrames:
+    """The readable frames of a video or image folder: ``frames`` yields (time s, grayscale image)."""
+
+    frames: Iterator[tuple[float, np.ndarray]]
+    image_size: tuple[int, int]
+    timestamps_from: str                 # how the times were obtained (rscalib.io.video.FrameSource)
+    frame_count_estimate: Optional[int]
+
+
+def read_gray_frames(source) -> GrayFrames:
+    """Open a video file or image folder (:func:`rscalib.io.video.open_source`); its image size is
+    that of the first readable frame. Unreadable frames are left out."""
+    opened = open_source(source)
+    frames = opened.frames(gray=True)
+    first = next(frames, None)
+    while first is not None and first.image is None:
+        first = next(frames, None)
+    if first is None:
+        raise InputError(f"{source}: no readable frames")
+    height, width = first.image.shape[:2]
+
+    def readable():
+        yield first.time_s, first.image
+        for frame in frames:
+            if frame.image is not None:
+                yield frame.time_s, frame.image
+
+    return GrayFrames(readable(), (width, height), opened.timestamps_source, opened.frame_count_estimate)
+
+
+def _checked_gray(frames: Iterable, width: int, height: int) -> Iterator[tuple[float, Any]]:
+    """(time, image) with every image checked for its size and made grayscale (None passes through)."""
+    for k, (t_s, image) in enumerate(frames):
+        if image is not None:
+            if image.shape[:2] != (height, width):
+                raise InputError(f"frame {k} is {image.shape[1]}x{image.shape[0]}, expected {width}x{height}")
+            if image.ndim == 3:
+                image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+        yield t_s, image
 
 
 def self_calibrate(frames: Iterable, image_size: tuple[int, int], *,
                    pixel_size_mm=PAPER_PIXEL_SIZE_MM, options: Optional[_core.SogOptions] = None,
-                   front_end: Optional[FrontEndOptions] = None, grid: Optional[dict] = None,
-                   max_frames: Optional[int] = None,
-                   progress: Optional[Callable[[int, _core.SogBank], None]] = None) -> SelfCalibResult:
-    """Run the SOG bank over `frames`: an iterable of (time_s, grayscale uint8 image).
+                   front_end: Union[FrontEndOptions, ImageFrontEnd, None] = None, grid: Optional[dict] = None,
+                   max_frames: Optional[int] = None, progress: ProgressArg = None,
+                   expected_frames: Optional[int] = None,
+                   on_frame: Optional[Callable[[int, _core.SogBank, _core.SogUpdateReport], None]] = None
+                   ) -> SelfCalibResult:
+    """Run the SOG bank over `frames`: an iterable of (time_s, image), grayscale or BGR uint8;
+    an image of None (unreadable) is skipped.
 
     pixel_size_mm: the sensor's pixel pitch (the distortion model's radii are in mm);
     grid: keyword arguments of rscalib.selfcalib.prior.initial_bank (ranges, counts);
-    progress(frame_index, bank) is called after every frame."""
+    front_end: the image front end's options (for 320 px wide images, scaled to this size) or a
+    ready :class:`ImageFrontEnd`;
+    progress: False/None, True (a progress bar on stderr) or a callable(done, total), with
+    `expected_frames` the bar's total when `max_frames` is not given;
+    on_frame(k, bank, report) is called after every processed frame."""
     width, height = int(image_size[0]), int(image_size[1])
-    fe = front_end or FrontEndOptions()
-    if fe.subpixel not in ("affine", "parabola"):
-        raise InputError(f"front_end.subpixel must be 'affine' or 'parabola', not {fe.subpixel!r}")
-    scale = width / 320.0
-    fe = FrontEndOptions(**{**fe.__dict__,
-                            "patch_half_px": max(3, int(round(fe.patch_half_px * max(1.0, scale ** 0.5)))),
-                            "min_separation_px": fe.min_separation_px * scale,
-                            "max_search_half_px": fe.max_search_half_px * scale})
+    source = front_end if isinstance(front_end, ImageFrontEnd) else ImageFrontEnd(front_end, (width, height))
     initial = initial_bank(width, height, pixel_size_mm, **(grid or {}))
     bank = make_bank(width, height, pixel_size_mm, options=options, bank=initial)
-    store = PatchStore(fe.patch_half_px)
-    hist_frame, hist_mean, hist_bounds, hist_ng, hist_nf = [], [], [], [], []
-    collapse = None
-    t_prev = None
-    processed = 0
-    filter_time = 0.0
-    started = time.perf_counter()
-    for k, (t_s, image) in enumerate(frames):
-        if max_frames is not None and k >= max_frames:
-            break
-        if image is None:
-            continue
-        if image.shape[:2] != (height, width):
-            raise InputError(f"frame {k} is {image.shape[1]}x{image.shape[0]}, expected {width}x{height}")
-        if image.ndim == 3:
-            image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-        t0 = time.perf_counter()
-        if t_prev is not None:
-            dt = float(t_s - t_prev)
-            if not dt > 0:
-                raise InputError(f"frame times must increase (frame {k}: dt = {dt} s)")
-            bank.predict(dt)
-        ids, uv_pred, cov = bank.predict_measurements()
-        filter_time += time.perf_counter() - t0
-        uv, found = active_search(image, store.patches, ids, uv_pred, cov, fe)
-        t0 = time.perf_counter()
-        report = bank.update(ids, uv, found)
-        filter_time += time.perf_counter() - t0
-        for fid in report.deleted_feature_ids:
-            store.patches.pop(int(fid), None)
-        needed = fe.min_visible - int(report.num_used)
-        if needed > 0:
-            avoid = np.vstack([uv_pred, uv[found]]) if len(ids) else np.zeros((0, 2))
-            new_uv = new_corners(image, avoid, needed if k == 0 else min(needed, fe.max_new_per_frame), fe,
-                                  fe.patch_half_px)
-            keep = [i for i, p in enumerate(new_uv) if store.cut(image, p) is not None]
-            if keep:
-                new_uv = new_uv[keep]
-                new_ids = bank.add_features(new_uv)
-                for fid, p in zip(new_ids, new_uv):
-                    store.patches[int(fid)] = store.cut(image, p).copy()
-        t_prev = t_s
-        processed += 1
-        hist_frame.append(k)
-        hist_mean.append(np.asarray(bank.calibration_mean))
-        hist_bounds.append(np.asarray(bank.calibration_bounds_99()))
-        hist_ng.append(bank.num_gaussians)
-        hist_nf.append(int(report.num_used))
-        if collapse is None and bank.num_gaussians == 1:
-            collapse = k
-        if progress:
-            progress(k, bank)
-    if processed == 0:
-        raise InputError("no frames to process")
-    elapsed = time.perf_counter() - started
+    total = max_frames if max_frames is not None else expected_frames
+    with Progress(progress, total, "self-calibrating") as bar:
+        def each_frame(k: int, running: _core.SogBank, report: _core.SogUpdateReport) -> None:
+            bar.update(k + 1)
+            if on_frame is not None:
+                on_frame(k, running, report)
+
+        history = run_bank(bank, _checked_gray(frames, width, height), source,
+                           min_visible=source.options.min_visible,
+                           max_new_per_frame=source.options.max_new_per_frame,
+                           max_frames=max_frames, on_frame=each_frame)
     warnings = []
     if bank.num_gaussians > 1:
         warnings.append(f"{bank.num_gaussians} Gaussians remain: the sequence did not single out one calibration "
                         "(move more, with rotation and translation, through a textured scene)")
-    if np.median(hist_nf) < 0.5 * fe.min_visible:
-        warnings.append(f"few features matched per frame (median {np.median(hist_nf):.0f}); the scene may lack texture")
+    used = np.median(history.features_used)
+    if used < 0.5 * source.options.min_visible:
+        warnings.append(f"few features matched per frame (median {used:.0f}); the scene may lack texture")
     return SelfCalibResult(
         mean=np.asarray(bank.calibration_mean), bounds_99=np.asarray(bank.calibration_bounds_99()),
         covariance=np.asarray(bank.calibration_cov), image_size=(width, height),
         pixel_size_mm=tuple(float(x) for x in np.broadcast_to(np.asarray(pixel_size_mm, float).reshape(-1), (2,))),
-        frames_processed=processed, gaussians_initial=len(initial), gaussians_left=bank.num_gaussians,
-        frames_per_s=processed / elapsed if elapsed > 0 else float("inf"), collapse_frame=collapse,
-        history_frame=np.asarray(hist_frame), history_mean=np.asarray(hist_mean),
-        history_bounds=np.asarray(hist_bounds), history_gaussians=np.asarray(hist_ng),
-        history_features=np.asarray(hist_nf), warnings=warnings)
+        gaussians_initial=len(initial), gaussians_left=bank.num_gaussians, history=history, warnings=warnings)
 
 
 def civera_to_opencv(camera: _core.CameraModel, samples: int = 40) -> tuple[_core.CameraModel, float]:

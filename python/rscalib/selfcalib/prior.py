@@ -23,7 +23,8 @@ import numpy as np
 from .. import _core
 from ..errors import InputError
 
-__all__ = ["InitialBank", "initial_bank", "make_bank", "PAPER_CAMERA_PARAMS", "PAPER_IMAGE_SIZE", "PAPER_PIXEL_SIZE_MM"]
+__all__ = ["InitialBank", "initial_bank", "make_bank", "single_gaussian_grid", "PAPER_CAMERA_PARAMS", "PAPER_IMAGE_SIZE",
+           "PAPER_PIXEL_SIZE_MM"]
 
 # The paper's camera (Civera et al. 2009, §6: an offline calibration of its 320x240 sequence): the one
 # definition, used by the prior's scaling, the CLI's default pixel pitch and the simulators.
@@ -101,6 +102,24 @@ def initial_bank(width: int, height: int, pixel_size_mm: Union[float, Sequence[f
     covs = np.broadcast_to(np.diag(sigmas ** 2), (len(means), 5, 5)).copy()
     weights = np.full(len(means), 1.0 / len(means))
     return InitialBank(means=means, covs=covs, weights=weights)
+
+
+def single_gaussian_grid(width: int, height: int,
+                         pixel_size_mm: Union[float, Sequence[float]] = PAPER_PIXEL_SIZE_MM, *,
+                         f_range: Optional[tuple[float, float]] = None, f0: Optional[float] = None,
+                         f_sigma: Optional[float] = None) -> dict:
+    """:func:`initial_bank` keyword arguments for one Gaussian, a single EKF (the baseline the paper
+    compares against): ``f0`` (default: the middle of the f range) with sigma ``f_sigma`` (default: a
+    quarter of the range), principal point and distortion at the middle of their ranges."""
+    grid = {} if f_range is None else {"f_range": tuple(f_range)}
+    default = initial_bank(width, height, pixel_size_mm, **grid)
+    f_lo, f_hi = default.means[:, 0].min(), default.means[:, 0].max()
+    f0 = 0.5 * (f_lo + f_hi) if f0 is None else f0
+    f_sigma = 0.25 * (f_hi - f_lo) if f_sigma is None else f_sigma
+    if not f0 > 0 or not f_sigma > 0:
+        raise InputError("f0 and f_sigma must be positive")
+    # _grid gives a count-1 grid the range's middle and sigma range/4.
+    return {**grid, "f_range": (f0 - 2 * f_sigma, f0 + 2 * f_sigma), "f_count": 1, "k1_count": 1, "k2_count": 1}
 
 
 def make_bank(width: int, height: int, pixel_size_mm: Union[float, Sequence[float]] = PAPER_PIXEL_SIZE_MM,

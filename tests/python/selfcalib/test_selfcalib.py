@@ -99,6 +99,7 @@ def test_selfcalib_cli_recovers_the_focal_length(room_sequence, tmp_path):
     assert result["frames_processed"] == 150
     assert result["gaussians_left"] < 108
     assert len(result["history"]["gaussians"]) == 150
+    assert result["provenance"]["command"] == "selfcalib" and result["bank"] == "sog"
     assert (tmp_path / "res" / "history.png").stat().st_size > 0
     camera = load_camera(tmp_path / "res" / "camera.yaml").camera
     assert camera.model == "pinhole-radtan"
