@@ -36,6 +36,16 @@ def check_inputs(observations: Observations, camera: CameraModel, rows: Optional
     return rows
 
 
+def initial_values(observations: Observations, camera: CameraModel, rows: Optional[int],
+                   line_delay_s: Optional[float]) -> tuple[int, float, float, float]:
+    """(rows, fps, nominal full-frame delay 1 / (fps rows), initial d) after check_inputs: d is the
+    given line delay, else the nominal one (docs/formulation.md §7 step 2)."""
+    rows = check_inputs(observations, camera, rows)
+    fps = frame_rate_hz(observations)
+    nominal_delay_s = 1.0 / (fps * rows)
+    return rows, fps, nominal_delay_s, float(nominal_delay_s if line_delay_s is None else line_delay_s)
+
+
 def seed_poses(observations: Observations, camera: CameraModel, warnings: list, min_frames: int
                ) -> tuple[Observations, FramePoses]:
     """GS PnP per frame, the initial guess of both trajectory models: the observations of the

@@ -27,9 +27,8 @@ from ..errors import InputError
 from ..observations import Observations
 from .common import (
     assess_noise_and_determinacy,
-    check_inputs,
     choose_pixel_sigma,
-    frame_rate_hz,
+    initial_values,
     seed_poses,
     solve_warnings,
     summary_fields,
@@ -145,11 +144,8 @@ def calibrate_line_delay_linear(observations: Observations, camera: CameraModel,
     further apart are not interpolated between (default 1.5 median frame intervals).
     """
     started = time.perf_counter()
-    rows = check_inputs(observations, camera, rows)
+    rows, fps, nominal_delay_s, d = initial_values(observations, camera, rows, line_delay0_s)
     warnings: list[str] = []
-    fps = frame_rate_hz(observations)
-    nominal_delay_s = 1.0 / (fps * rows)
-    d = float(nominal_delay_s if line_delay0_s is None else line_delay0_s)
     if not math.isfinite(d):
         raise InputError("line_delay0_s must be a finite number")
     if max_frame_interval_s is None:

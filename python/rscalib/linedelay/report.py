@@ -291,6 +291,18 @@ def _plots(result: Estimate, camera: CameraModel, out: Path) -> dict:
 
 # ---------------------------------------------------------------------------------- writers
 
+def _start(result, out_dir, frames_total: Optional[int], extra: Optional[dict], **fields) -> tuple[Path, dict]:
+    """out_dir (created) and the result's summary_dict with `fields`, the frames read (if given)
+    and the `extra` fields."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = result.summary_dict() | fields
+    if frames_total is not None:
+        summary["frames_total"] = int(frames_total)
+    summary.update(extra or {})
+    return out, summary
+
+
 def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_total: Optional[int] = None,
                   extra: Optional[dict] = None, fps: float = 0.0, title: Optional[str] = None,
                   command: str = "linedelay", inputs: Optional[dict] = None) -> dict:
@@ -298,12 +310,7 @@ def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_tota
     trajectory.csv, the camera files, the plots and report.html. Returns the result.json dict
     (without its provenance). frames_total: frames read (default: the result's); extra: more
     result.json fields; fps: for the Gyroflow profile; command, inputs: the provenance."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    summary = result.summary_dict()
-    if frames_total is not None:
-        summary["frames_total"] = int(frames_total)
-    summary.update(extra or {})
+    out, summary = _start(result, out_dir, frames_total, extra)
     v = verdict(result)
     summary["verdict"] = {"trust": v.trust, "headline": v.headline, "reasons": v.reasons}
     warnings = list(summary["warnings"])
@@ -330,13 +337,9 @@ def write_localize_outputs(result: LineDelayResult, out_dir, *, comparison: Opti
     """A trajectory with a known line delay (rscalib.localize) into out_dir: result.json (with the
     comparison against per-frame GS PnP, linedelay.pnp.compare_with_pnp), trajectory.csv and
     trajectory.png. Returns the result.json dict."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    summary = result.summary_dict() | {"trajectory_model": "rs-spline", "gs_pnp_comparison": comparison}
+    out, summary = _start(result, out_dir, frames_total, extra, trajectory_model="rs-spline",
+                          gs_pnp_comparison=comparison)
     summary.pop("line_delay_std_s", None)  # d was given, not estimated
-    if frames_total is not None:
-        summary["frames_total"] = int(frames_total)
-    summary.update(extra or {})
     summary["files"] = {"trajectory_csv": write_trajectory_csv(result, out / "trajectory.csv").name,
                         "plots": [plot_trajectory(result, out / "trajectory.png").name]}
     write_result_json(out, summary, command=command, inputs=inputs)
@@ -348,12 +351,7 @@ def write_pnp_outputs(trajectory: PnpTrajectory, out_dir, *, frames_total: Optio
                       inputs: Optional[dict] = None) -> dict:
     """Per-frame GS PnP poses (linedelay.pnp.pnp_trajectory) into out_dir: result.json and a
     trajectory.csv in the format of the other models. Returns the result.json dict."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    summary = trajectory.summary_dict()
-    if frames_total is not None:
-        summary["frames_total"] = int(frames_total)
-    summary.update(extra or {})
+    out, summary = _start(trajectory, out_dir, frames_total, extra)
     summary["files"] = {"trajectory_csv": write_trajectory_csv(trajectory, out / "trajectory.csv").name}
     write_result_json(out, summary, command=command, inputs=inputs)
     return summary

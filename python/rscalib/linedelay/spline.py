@@ -20,9 +20,8 @@ from ..errors import InputError
 from ..observations import Observations
 from .common import (
     assess_noise_and_determinacy,
-    check_inputs,
     choose_pixel_sigma,
-    frame_rate_hz,
+    initial_values,
     seed_poses,
     solve_warnings,
     summary_fields,
@@ -200,11 +199,8 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
          motion_prior_q=DEFAULT_MOTION_PRIOR_Q, robust_loss="none", num_threads=2,
          progress=None) -> LineDelayResult:
     started = time.perf_counter()
-    rows = check_inputs(observations, camera, rows)
+    rows, fps, nominal_delay_s, d = initial_values(observations, camera, rows, line_delay_s)
     warnings: list[str] = []
-    fps = frame_rate_hz(observations)
-    nominal_delay_s = 1.0 / (fps * rows)
-    d = float(nominal_delay_s if line_delay_s is None else line_delay_s)
     initial_d = d
     if min_segment_s is None:
         # Halving stops below 2 * min_segment_s, so segments can reach ~1 frame at 30 fps. A 2-frame
