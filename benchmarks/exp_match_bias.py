@@ -26,6 +26,7 @@ from exp_sog_vs_single import frames_for
 from rscalib.selfcalib.calibrate import self_calibrate
 from rscalib.selfcalib.front_end import FrontEndOptions, ImageFrontEnd
 from rscalib.sim.scene_video import render_scene_frames
+from rscalib.sim.trajectories import RoomWalkTrajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 AGE_BINS = [(1, 5), (5, 15), (15, 40), (40, 100), (100, 10 ** 6)]
@@ -70,7 +71,6 @@ def run(seed: int, frames: int, mode: str) -> dict:
     times, images, truth = frames_for(seed, frames)
     # Poses and per-pixel surface truth (cheap: no rendering of images).
     posed = render_scene_frames(num_frames=1, seed=seed)
-    from rscalib.sim.scene_video import RoomWalkTrajectory
     R, p = RoomWalkTrajectory(seed=seed).pose_cw(times)
     posed.R_cw, posed.p_cw = np.asarray(R), np.asarray(p)
     image_size = (images.shape[2], images.shape[1])
