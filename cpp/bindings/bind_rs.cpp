@@ -66,6 +66,7 @@ void BindRs(py::module_& m) {
       .def_readonly("segment_cost", &RsSolveSummary::segment_cost)
       .def_readonly("segment_count", &RsSolveSummary::segment_count)
       .def_readonly("residual_px", &RsSolveSummary::residual_px)
+      .def_readonly("image_velocity_px_s", &RsSolveSummary::image_velocity_px_s)
       .def_readonly("standardised_sq", &RsSolveSummary::standardised_sq)
       .def_readonly("observation_time_s", &RsSolveSummary::observation_time_s);
 

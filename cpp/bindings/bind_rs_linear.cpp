@@ -53,6 +53,7 @@ void BindRsLinear(py::module_& m) {
       .def_readonly("covariance_time_s", &LinearInterpSummary::covariance_time_s)
       .def_readonly("pair_first", &LinearInterpSummary::pair_first)
       .def_readonly("residual_px", &LinearInterpSummary::residual_px)
+      .def_readonly("image_velocity_px_s", &LinearInterpSummary::image_velocity_px_s)
       .def_readonly("standardised_sq", &LinearInterpSummary::standardised_sq)
       .def_readonly("observation_time_s", &LinearInterpSummary::observation_time_s);
 

@@ -239,6 +239,9 @@ class RsSolveSummary:
     def covariance_time_s(self) -> float:
         ...
     @property
+    def image_velocity_px_s(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]"]:
+        ...
+    @property
     def iterations(self) -> int:
         ...
     @property
@@ -393,6 +396,9 @@ class LinearInterpSummary:
         ...
     @property
     def extrapolated(self) -> int:
+        ...
+    @property
+    def image_velocity_px_s(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]"]:
         ...
     @property
     def isolated(self) -> int:

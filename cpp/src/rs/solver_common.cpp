@@ -61,6 +61,7 @@ void SetWeightedError(const Eigen::Vector2d& measured_uv, const Eigen::Vector2d&
   error->ok = std::isfinite(predicted_uv[0]) && std::isfinite(predicted_uv[1]);
   if (!error->ok) return;
   error->residual_px = measured_uv - predicted_uv;
+  error->image_velocity_px_s = image_velocity_px_s;
   if (standardise_errors) {
     const StandardisationWeight w =
         ComputeStandardisationWeight(line_delay_s, image_velocity_px_s, pixel_sigma, max_rs_gain);

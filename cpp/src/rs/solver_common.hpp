@@ -80,6 +80,7 @@ struct WeightedError {
   bool clamped = false;
   Eigen::Matrix2d sqrt_information = Eigen::Matrix2d::Identity();
   Eigen::Vector2d residual_px = Eigen::Vector2d::Zero();
+  Eigen::Vector2d image_velocity_px_s = Eigen::Vector2d::Zero();  // d(uv)/dt, for A and the report
   double time_s = 0.0;
 };
 
@@ -91,13 +92,14 @@ void SetWeightedError(const Eigen::Vector2d& measured_uv, const Eigen::Vector2d&
                       WeightedError* error);
 
 // Per-observation outputs and totals both summaries have. `Summary` has residual_px,
-// standardised_sq, observation_time_s, measurement_cost, num_error_terms, clamped_weights
-// and rms_px. Rows of errors that are not ok are NaN and not counted.
+// image_velocity_px_s, standardised_sq, observation_time_s, measurement_cost, num_error_terms,
+// clamped_weights and rms_px. Rows of errors that are not ok are NaN and not counted.
 template <typename Summary>
 void FillErrorStatistics(const std::vector<const WeightedError*>& errors, Summary* summary) {
   const Eigen::Index m = static_cast<Eigen::Index>(errors.size());
   const double nan = std::numeric_limits<double>::quiet_NaN();
   summary->residual_px.resize(m, 2);
+  summary->image_velocity_px_s.resize(m, 2);
   summary->standardised_sq.resize(m);
   summary->observation_time_s.resize(m);
   summary->measurement_cost = 0.0;
@@ -109,12 +111,14 @@ void FillErrorStatistics(const std::vector<const WeightedError*>& errors, Summar
     summary->observation_time_s[i] = e.time_s;
     if (!e.ok) {
       summary->residual_px.row(i).setConstant(nan);
+      summary->image_velocity_px_s.row(i).setConstant(nan);
       summary->standardised_sq[i] = nan;
       continue;
     }
     summary->clamped_weights += e.clamped;
     const double sq = (e.sqrt_information * e.residual_px).squaredNorm();
     summary->residual_px.row(i) = e.residual_px.transpose();
+    summary->image_velocity_px_s.row(i) = e.image_velocity_px_s.transpose();
     summary->standardised_sq[i] = sq;
     summary->measurement_cost += sq;
     summary->num_error_terms += 1;

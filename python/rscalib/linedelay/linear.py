@@ -67,6 +67,7 @@ class LinearInterpResult:
     solve_time_s: float
     observation_time_s: np.ndarray    # (M,) t_k + v d
     residual_px: np.ndarray           # (M, 2) y - pi(...), NaN where not used
+    image_velocity_px_s: np.ndarray   # (M, 2) d(uv)/dt at the final estimate (the solver's, for A)
     standardised_sq: np.ndarray       # (M,)
     gs_poses: FramePoses              # the per-frame GS PnP initial guess
     used_observations: Observations = field(repr=False)
@@ -189,4 +190,5 @@ def calibrate_line_delay_linear(observations: Observations, camera: CameraModel,
         num_chains=summary.num_chains, initial_line_delay_s=initial_d,
         solve_time_s=time.perf_counter() - started,
         observation_time_s=np.asarray(summary.observation_time_s), residual_px=np.asarray(summary.residual_px),
+        image_velocity_px_s=np.asarray(summary.image_velocity_px_s),
         standardised_sq=np.asarray(summary.standardised_sq), gs_poses=gs, used_observations=used)

@@ -46,28 +46,6 @@ class Verdict:
     headline: str
 
 
-def image_velocity(result: LineDelayResult, camera: CameraModel, times_s: np.ndarray, points_w: np.ndarray,
-                   h_s: float = 1e-4) -> np.ndarray:
-    """(u_dot, v_dot) in px/s of each point at its time, by central differences of the
-    projection through the estimated trajectory.
-
-    The solver computes these velocities too (for the noise map A, paper eq. 15-21), but
-    `_core.RsSolveSummary` does not expose them, so the plots recompute them here."""
-    traj = result.trajectory
-    t = np.clip(times_s, traj.t_begin + h_s, traj.t_end - h_s)
-    uv = []
-    for dt in (-h_s, h_s):
-        rotations, translations = _core.poses_at(traj, t + dt)
-        points_c = np.einsum("nij,nj->ni", rotations, points_w) + translations
-        uv.append(camera.project(points_c))
-    return (uv[1] - uv[0]) / (2 * h_s)
-
-
-def observation_velocity(result: LineDelayResult, camera: CameraModel) -> np.ndarray:
-    """(M, 2) image velocity of every used observation at its time t_i + v d."""
-    return image_velocity(result, camera, result.observation_time_s, result.used_observations.points_w())
-
-
 def verdict(result: Estimate) -> Verdict:
     reasons = []
     if not result.determined:
@@ -169,15 +147,14 @@ def plot_residuals_image(result: Estimate, path: Path) -> Path:
     return _save(fig, path)
 
 
-def plot_covariance_ellipses(result: LineDelayResult, camera: CameraModel, path: Path, count: int = 6,
-                             velocity: Optional[np.ndarray] = None) -> Path:
+def plot_covariance_ellipses(result: LineDelayResult, path: Path, count: int = 6) -> Path:
     """Paper Fig. 2: error covariance A R A^T (red) against R (grey) at a few observations
-    with fast image motion, drawn at their image position and magnified. velocity: the
-    observations' image velocities (default: observation_velocity)."""
+    with fast image motion (the solver's image velocities), drawn at their image position and
+    magnified."""
     obs = result.used_observations
-    velocity = observation_velocity(result, camera) if velocity is None else velocity
+    velocity = result.image_velocity_px_s
     speed = np.linalg.norm(velocity, axis=1)
-    picks = np.argsort(speed)[::-1][: max(1, len(speed) // 50)]
+    picks = np.argsort(np.nan_to_num(speed, nan=-1.0))[::-1][: max(1, len(speed) // 50)]
     picks = picks[np.linspace(0, len(picks) - 1, min(count, len(picks))).astype(int)]
     fig, ax = plt.subplots(figsize=(7, 5.5))
     scale = 40.0 / max(result.pixel_sigma, 1e-9)
@@ -199,11 +176,10 @@ def plot_covariance_ellipses(result: LineDelayResult, camera: CameraModel, path:
     return _save(fig, path)
 
 
-def plot_knots_and_speed(result: LineDelayResult, camera: CameraModel, path: Path,
-                         velocity: Optional[np.ndarray] = None) -> Path:
+def plot_knots_and_speed(result: LineDelayResult, path: Path) -> Path:
+    """Knot density against the image speed of the observations (the solver's image velocities)."""
     obs = result.used_observations
-    velocity = observation_velocity(result, camera) if velocity is None else velocity
-    speed = np.linalg.norm(velocity, axis=1)
+    speed = np.linalg.norm(result.image_velocity_px_s, axis=1)
     t0 = result.trajectory.t_begin
     knots = result.knots - t0
     fig, ax = plt.subplots(figsize=(9, 3.8))
@@ -268,7 +244,7 @@ def plot_trajectory(result: Estimate, path: Path) -> Path:
     return _save(fig, path)
 
 
-def _plots(result: Estimate, camera: CameraModel, out: Path) -> dict:
+def _plots(result: Estimate, out: Path) -> dict:
     """The report's plots of a line-delay estimate, {caption: path}: residuals and trajectory for
     both models; the spline's error ellipses, knot density and rounds besides (the linear model has
     no knots, no rounds and, by default, unstandardised errors)."""
@@ -277,12 +253,9 @@ def _plots(result: Estimate, camera: CameraModel, out: Path) -> dict:
         "residuals over the image and target coverage": plot_residuals_image(result, out / "residuals_image.png"),
     }
     if isinstance(result, LineDelayResult):
-        velocity = observation_velocity(result, camera)
         plots |= {
-            "error covariance ellipses (paper Fig. 2)": plot_covariance_ellipses(
-                result, camera, out / "covariance_ellipses.png", velocity=velocity),
-            "knot density and image motion": plot_knots_and_speed(result, camera, out / "knots_speed.png",
-                                                                  velocity=velocity),
+            "error covariance ellipses (paper Fig. 2)": plot_covariance_ellipses(result, out / "covariance_ellipses.png"),
+            "knot density and image motion": plot_knots_and_speed(result, out / "knots_speed.png"),
             "line delay per knot-adaptation round": plot_rounds(result, out / "rounds.png"),
         }
     plots["trajectory"] = plot_trajectory(result, out / "trajectory.png")
@@ -319,7 +292,7 @@ def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_tota
     camera_files, camera_warnings = write_camera_set(camera, out, result.line_delay_s, fps=fps, rms_px=result.rms_px)
     files |= camera_files
     warnings += camera_warnings
-    plots = _plots(result, camera, out)
+    plots = _plots(result, out)
     files["plots"] = [p.name for p in plots.values()]
     files["report"] = "report.html"
     summary["warnings"] = warnings

@@ -81,6 +81,7 @@ class LineDelayResult:
     segment_count: np.ndarray         # N_j
     observation_time_s: np.ndarray    # (M,) t_i + v d
     residual_px: np.ndarray           # (M, 2) y - pi(...)
+    image_velocity_px_s: np.ndarray   # (M, 2) d(uv)/dt at the final estimate (the solver's, for A)
     standardised_sq: np.ndarray       # (M,) squared standardised error
     frame_poses: FramePoses           # the GS PnP initial guess / baseline
     used_observations: Observations = field(repr=False)
@@ -291,4 +292,5 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         initial_line_delay_s=initial_d, solve_time_s=time.perf_counter() - started,
         segment_cost=np.asarray(summary.segment_cost), segment_count=np.asarray(summary.segment_count),
         observation_time_s=np.asarray(summary.observation_time_s), residual_px=np.asarray(summary.residual_px),
+        image_velocity_px_s=np.asarray(summary.image_velocity_px_s),
         standardised_sq=np.asarray(summary.standardised_sq), frame_poses=used_poses, used_observations=used)

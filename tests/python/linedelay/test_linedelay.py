@@ -244,3 +244,27 @@ def test_pixel_sigma_estimated_from_the_grid(noise_px):
     sigma = estimate_pixel_sigma(sim.observations)
     assert sigma is not None
     assert sigma == pytest.approx(noise_px, rel=0.10)
+
+
+# --------------------------------------------------------------------------------------------------
+# The solver's image velocities (used by the report's plots)
+
+
+def test_solver_image_velocities_match_finite_differences_of_the_projection():
+    """result.image_velocity_px_s is d(uv)/dt that the solver computed for A (by a Jet in time);
+    the oracle is central differences of the projection through the estimated trajectory."""
+    sim, result = calibrated(30e-6, 2)
+    t = result.observation_time_s
+    traj = result.trajectory
+    inside = (t > traj.t_begin + 1e-3) & (t < traj.t_end - 1e-3)
+    points_w = result.used_observations.points_w()
+    h_s = 1e-5
+    uv = []
+    for dt in (-h_s, h_s):
+        rotations, translations = rscalib.poses_at(traj, t[inside] + dt)
+        uv.append(CAMERA.project(np.einsum("nij,nj->ni", rotations, points_w[inside]) + translations))
+    finite_difference = (uv[1] - uv[0]) / (2 * h_s)
+    velocity = result.image_velocity_px_s[inside]
+    assert velocity.shape == finite_difference.shape and np.isfinite(velocity).all()
+    assert np.median(np.linalg.norm(velocity, axis=1)) > 10.0  # the camera moves: a real comparison
+    np.testing.assert_allclose(velocity, finite_difference, rtol=1e-4, atol=1e-3)

@@ -66,6 +66,7 @@ struct RsSolveSummary {
   std::vector<int> segment_count;
   // Per observation: raw error e = y - pi(...) and standardised squared norm.
   Eigen::MatrixX2d residual_px;
+  Eigen::MatrixX2d image_velocity_px_s;  // (M, 2) d(uv)/dt at the final estimate, NaN if not used
   Eigen::VectorXd standardised_sq;
   Eigen::VectorXd observation_time_s;
 };

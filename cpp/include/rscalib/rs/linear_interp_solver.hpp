@@ -71,6 +71,7 @@ struct LinearInterpSummary {
   // standardised norm and time t_k + v d.
   Eigen::VectorXi pair_first;
   Eigen::MatrixX2d residual_px;
+  Eigen::MatrixX2d image_velocity_px_s;  // (M, 2) d(uv)/dt at the final estimate, NaN if not used
   Eigen::VectorXd standardised_sq;
   Eigen::VectorXd observation_time_s;
 };
