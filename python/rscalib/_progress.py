@@ -13,7 +13,8 @@ ProgressArg = Union[bool, None, Callable[[int, Optional[int]], None]]
 
 
 class Progress:
-    """Context manager; ``update(done)`` reports ``done`` items of ``total`` (None: unknown)."""
+    """Context manager; ``update(done, status)`` reports ``done`` items of ``total`` (None: unknown)
+    and, on the bar only, a short status text (e.g. the current estimate)."""
 
     def __init__(self, progress: ProgressArg, total: Optional[int], label: str, unit: str = "frames") -> None:
         self._callback = progress if callable(progress) else None
@@ -26,7 +27,7 @@ class Progress:
     def __enter__(self) -> Progress:
         return self
 
-    def update(self, done: int) -> None:
+    def update(self, done: int, status: str = "") -> None:
         self._done = done
         if self._callback is not None:
             self._callback(done, self.total)
@@ -37,12 +38,13 @@ class Progress:
             from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
             from rich.progress import Progress as RichProgress
             self._bar = RichProgress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                     TextColumn("{task.fields[rate]}"), TimeElapsedColumn(), TimeRemainingColumn(),
+                                     TextColumn("{task.fields[rate]}"), TextColumn("{task.fields[status]}"),
+                                     TimeElapsedColumn(), TimeRemainingColumn(),
                                      console=Console(stderr=True), transient=False)
             self._bar.__enter__()
-            self._task = self._bar.add_task(self.label, total=self.total, rate="")
+            self._task = self._bar.add_task(self.label, total=self.total, rate="", status="")
         rate = done / max(1e-9, time.perf_counter() - self._start)
-        self._bar.update(self._task, completed=done, rate=f"{rate:.1f} {self.unit}/s")
+        self._bar.update(self._task, completed=done, rate=f"{rate:.1f} {self.unit}/s", status=status)
 
     def advance(self, count: int = 1) -> None:
         self.update(self._done + count)

@@ -133,7 +133,7 @@ def self_calibrate(frames: Iterable, image_size: tuple[int, int], *,
     total = max_frames if max_frames is not None else expected_frames
     with Progress(progress, total, "self-calibrating") as bar:
         def each_frame(k: int, running: _core.SogBank, report: _core.SogUpdateReport) -> None:
-            bar.update(k + 1)
+            bar.update(k + 1, f"f {running.calibration_mean[0]:.1f} px, {running.num_gaussians} Gaussians")
             if on_frame is not None:
                 on_frame(k, running, report)
 
