@@ -7,7 +7,7 @@ from a random pose (a homography warp), with mild blur and noise. Two rates per 
 - "one process": rscalib.detection.detectors.Detector.detect on decoded grey frames (detection only);
 - "detect_video": the whole pipeline on an MJPG video of the same frames repeated 3 times —
   decoding, the worker processes (all usable cores) and their start-up included, no cache.
-SPEC §6 asks for at least the video's frame rate (30 fps) at 640x480.
+The target is at least the video's frame rate (30 fps) at 640x480.
 Writes a markdown table and the machine info to benchmarks/results/bench_detect.json.
 """
 from __future__ import annotations

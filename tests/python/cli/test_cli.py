@@ -1,4 +1,4 @@
-"""Tests of the `rscalib` command line (SPEC §5): version, help, exit codes, the demo.
+"""Tests of the `rscalib` command line: version, help, exit codes, the demo.
 
 The installed console script is run as a subprocess (falling back to `python -m rscalib.cli`
 when the script is not next to the interpreter, e.g. in a system-wide install).

@@ -1,7 +1,7 @@
 """Tests of the camera models (rscalib.CameraModel) and the OpenCV conversions.
 
 Oracles: cv2.projectPoints / cv2.fisheye.projectPoints for the pinhole models, a NumPy
-implementation (written here, from SPEC §4) of Civera's radial model, and central finite
+implementation (written here, from docs/conventions.md) of Civera's radial model, and central finite
 differences of project() for the Jacobians.
 """
 import pickle
@@ -14,7 +14,7 @@ import rscalib
 from rscalib import CameraModel, InputError
 from rscalib.io.cameras import camera_from_opencv, opencv_matrices
 
-# The camera of Civera et al. 2009 (SPEC §4): 320x240, pixel 0.0112 mm.
+# The camera of Civera et al. 2009: 320x240, pixel 0.0112 mm.
 CIVERA_PARAMS = [194.06, 160.22, 128.87, 0.06333, 0.0139]
 CIVERA_PIXEL_MM = [0.0112, 0.0112]
 

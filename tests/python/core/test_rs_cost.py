@@ -1,4 +1,4 @@
-"""Tests of the rolling-shutter reprojection cost and the error standardisation (SPEC §2).
+"""Tests of the rolling-shutter reprojection cost and the error standardisation (Oth et al. 2013 eq. 6-21; docs/formulation.md §3-4).
 
 Oracles are independent of the code under test: the pose comes from rscalib.poses_at (cross-checked
 against SciPy's rotation vectors), projection from cv2.projectPoints / cv2.fisheye.projectPoints,
@@ -134,7 +134,7 @@ def test_rs_cost_residual_and_jacobians(camera, seed):
                 f"span {span}, d r / d c{j}:\n{analytic}\nvs finite differences\n{numeric}"
             assert np.abs(numeric).max() > 1.0  # every control point of the span matters
 
-        # d r / d line delay: flows through the time t_i + v d (SPEC §2, paper eq. 13-14).
+        # d r / d line delay: flows through the time t_i + v d (paper eq. 13-14).
         hd = 1e-9
         numeric_d = (residual_only(trajectory, span, camera, frame_time, uv, point_w, d + hd, w)
                      - residual_only(trajectory, span, camera, frame_time, uv, point_w, d - hd, w)) / (2 * hd)
@@ -267,7 +267,7 @@ def test_standardisation_weight_clamps_the_rs_gain(gain):
 
 
 # --------------------------------------------------------------------------------------------------
-# Monte Carlo: Cov(e) = A R A^T (SPEC §2)
+# Monte Carlo: Cov(e) = A R A^T (paper eq. 19-21)
 
 
 class FastRotation:
