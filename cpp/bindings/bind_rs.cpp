@@ -30,6 +30,8 @@ void BindRs(py::module_& m) {
                               "Options of the line-delay solve (docs/formulation.md).")
       .def(py::init<>())
       .def_readwrite("pixel_sigma", &RsSolverOptions::pixel_sigma, "R = sigma^2 I, px")
+      .def_readwrite("observation_sigma", &RsSolverOptions::observation_sigma,
+                     "optional per-observation sigma (M values, px); empty: pixel_sigma for all")
       .def_readwrite("standardise_errors", &RsSolverOptions::standardise_errors)
       .def_readwrite("max_rs_gain", &RsSolverOptions::max_rs_gain)
       .def_readwrite("use_motion_prior", &RsSolverOptions::use_motion_prior)

@@ -130,9 +130,92 @@ def _view_features(obs, rows: np.ndarray) -> np.ndarray:
     return np.r_[centre, size, normal]
 
 
+# Rolling shutter: a moving board is sheared by up to speed x readout. Views of a video are kept
+# when that shift, with the readout bounded by a frame period, is at most STILL_SHIFT_PX; if fewer
+# than MIN_STILL_VIEWS are that still, the stillest MIN_STILL_VIEWS are used with a warning.
+STILL_SHIFT_PX = 0.5
+MIN_STILL_VIEWS = 12
+# k3 is fitted only when the board reaches this fraction of the image's half-diagonal.
+K3_MIN_RADIUS = 0.8
+
+
+def view_speeds_px_s(detections: DetectionResult) -> np.ndarray:
+    """(F,) median image speed (px/s) of each observation frame from its neighbouring frames in the
+    source (same corners), NaN where a neighbour is missing (stills, gaps)."""
+    obs = detections.observations
+    numbers = np.asarray(detections.frame_numbers)
+    speed = np.full(obs.num_frames, np.nan)
+    if obs.num_frames < 2:
+        return speed
+    table = np.full((obs.num_frames, len(obs.target_points), 2), np.nan)
+    table[obs.frame_index, obs.point_id] = obs.uv
+    for f in range(obs.num_frames):
+        near = [g for g in (f - 1, f + 1) if 0 <= g < obs.num_frames and abs(numbers[g] - numbers[f]) == 1]
+        values = []
+        for g in near:
+            dt = abs(obs.frame_times_s[g] - obs.frame_times_s[f])
+            if dt <= 0:
+                continue
+            step = np.linalg.norm(table[g] - table[f], axis=1)
+            step = step[np.isfinite(step)]
+            if step.size >= MIN_POINTS_PER_VIEW:
+                values.append(np.median(step) / dt)
+        if values:
+            speed[f] = float(np.mean(values))
+    return speed
+
+
+def still_frames(detections: DetectionResult, warnings: list) -> Optional[np.ndarray]:
+    """Bool (F,) of the observation frames still enough for a rolling-shutter camera, or None when
+    the input has no neighbouring frames (stills: nothing to judge)."""
+    speed = view_speeds_px_s(detections)
+    known = np.isfinite(speed)
+    if known.sum() < MIN_VIEWS:
+        return None
+    obs = detections.observations
+    period = float(np.median(np.diff(obs.frame_times_s)))
+    rows = obs.image_size[1]
+    span = np.zeros(obs.num_frames)
+    for f, sl in enumerate(obs.frame_slices()):
+        if len(sl):
+            span[f] = np.ptp(obs.uv[sl, 1]) / rows
+    shift = speed * period * span          # px of shear if the readout took a whole frame period
+    still = known & (shift <= STILL_SHIFT_PX)
+    if still.sum() >= MIN_STILL_VIEWS:
+        if still.sum() < known.sum():
+            warnings.append(f"rolling shutter: {int(still.sum())} of {int(known.sum())} video frames are still "
+                            f"enough (shear <= {STILL_SHIFT_PX:g} px) and were used; moving frames bias the focal "
+                            "length and principal point")
+        return still
+    order = np.argsort(np.where(known, shift, np.inf))[:MIN_STILL_VIEWS]
+    keep = np.zeros(obs.num_frames, dtype=bool)
+    keep[order] = True
+    worst = float(np.max(shift[order]))
+    warnings.append(f"rolling shutter: only {int(still.sum())} video frames are still enough; the "
+                    f"{MIN_STILL_VIEWS} stillest were used (shear up to {worst:.1f} px), so the intrinsics may be "
+                    "biased: film a few seconds holding the camera still at several angles, or use stills")
+    return keep
+
+
+def radial_reach(detections: DetectionResult, views: np.ndarray) -> float:
+    """Largest distance of a detected point from the image centre, as a fraction of the half-diagonal."""
+    obs = detections.observations
+    width, height = obs.image_size
+    slices = obs.frame_slices()
+    uv = np.concatenate([obs.uv[slices[v]] for v in views]) if len(views) else np.zeros((0, 2))
+    if not len(uv):
+        return 0.0
+    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    return float(np.max(np.linalg.norm(uv - centre, axis=1)) / np.hypot(width / 2.0, height / 2.0))
+
+
 def calibrate_intrinsics(detections: DetectionResult, model: str = "pinhole-radtan",
-                         max_views: int = 40) -> IntrinsicsResult:
-    """Calibrate from detections (see detect.detect_video). InputError when there are too few views."""
+                         max_views: int = 40, rolling_shutter: bool = True) -> IntrinsicsResult:
+    """Calibrate from detections (see detect.detect_video). InputError when there are too few views.
+
+    rolling_shutter: from a video, use only frames still enough that the rolling shutter does not
+    shear the board (still_frames). The model is chosen by the data: pinhole-radtan fits k3 only
+    when the board reaches K3_MIN_RADIUS of the half-diagonal and k3 is significant."""
     if model not in MODELS:
         raise InputError(f"unknown model {model!r} (one of {', '.join(MODELS)})")
     if max_views < MIN_VIEWS:
@@ -141,7 +224,13 @@ def calibrate_intrinsics(detections: DetectionResult, model: str = "pinhole-radt
     if obs.num_frames == 0:
         raise InputError(f"the target was not found in any of {detections.frames_total} frames "
                          f"({_dropped_text(detections.dropped)}); check the target file (e.g. its size)")
-    views = select_views(detections, max_views)
+    warnings = []
+    still = still_frames(detections, warnings) if rolling_shutter else None
+    if still is not None:
+        chosen = _select_from(detections, np.flatnonzero(still), max_views)
+        views = chosen
+    else:
+        views = select_views(detections, max_views)
     if len(views) < MIN_VIEWS:
         raise InputError(f"only {len(views)} view(s) with at least {MIN_POINTS_PER_VIEW} target points; "
                          f"need {MIN_VIEWS} or more")
@@ -149,9 +238,16 @@ def calibrate_intrinsics(detections: DetectionResult, model: str = "pinhole-radt
     object_points = [obs.target_points[obs.point_id[slices[v]]].astype(np.float64) for v in views]
     image_points = [obs.uv[slices[v]].astype(np.float64) for v in views]
     size = obs.image_size
-    warnings = []
     if model == "pinhole-radtan":
-        k, dist, rvecs, tvecs, std = _calibrate_radtan(object_points, image_points, size)
+        reach = radial_reach(detections, views)
+        fit_k3 = reach >= K3_MIN_RADIUS
+        k, dist, rvecs, tvecs, std = _calibrate_radtan(object_points, image_points, size, fit_k3)
+        if fit_k3 and not abs(dist[4]) > std[8]:
+            warnings.append(f"k3 = {dist[4]:.3g} +- {std[8]:.2g} is not significant: refitted without k3 (k3 = 0)")
+            k, dist, rvecs, tvecs, std = _calibrate_radtan(object_points, image_points, size, False)
+        elif not fit_k3:
+            warnings.append(f"k3 not fitted (k3 = 0): the board reached only {reach * 100:.0f} % of the image's "
+                            f"half-diagonal (k3 needs >= {K3_MIN_RADIUS * 100:.0f} %: bring the board into the corners)")
         params = np.r_[k[0, 0], k[1, 1], k[0, 2], k[1, 2], dist[:5]]
     else:
         k, dist, rvecs, tvecs, std = _calibrate_fisheye(object_points, image_points, size)
@@ -175,13 +271,25 @@ def calibrate_intrinsics(detections: DetectionResult, model: str = "pinhole-radt
         views_available=obs.num_frames, warnings=warnings)
 
 
-def _calibrate_radtan(object_points, image_points, size):
+def _select_from(detections: DetectionResult, frames: np.ndarray, max_views: int) -> np.ndarray:
+    """select_views among the given observation frames only."""
+    obs = detections.observations
+    keep = np.zeros(obs.num_frames, dtype=bool)
+    keep[frames] = True
+    sub = DetectionResult(obs.subset_frames(keep), detections.frames_total, int(keep.sum()), detections.dropped,
+                          detections.from_cache, detections.image_size, np.asarray(detections.frame_numbers)[keep],
+                          [lbl for lbl, k in zip(detections.frame_labels, keep) if k],
+                          np.asarray(detections.blur_px)[keep], detections.timestamps)
+    return np.flatnonzero(keep)[select_views(sub, max_views)]
+
+
+def _calibrate_radtan(object_points, image_points, size, fit_k3: bool = True):
     obj = [o.astype(np.float32).reshape(-1, 1, 3) for o in object_points]
     img = [i.astype(np.float32).reshape(-1, 1, 2) for i in image_points]
     criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-12)
     try:
         _, k, dist, rvecs, tvecs, std_intrinsics, _, _ = cv2.calibrateCameraExtended(
-            obj, img, tuple(size), None, None, flags=0, criteria=criteria)
+            obj, img, tuple(size), None, None, flags=0 if fit_k3 else cv2.CALIB_FIX_K3, criteria=criteria)
     except cv2.error as error:
         raise InputError(f"calibration failed ({_cv_message(error)})") from None
     # OpenCV's order: fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, ...

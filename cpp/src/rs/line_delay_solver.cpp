@@ -53,10 +53,11 @@ std::vector<Attachment> Attach(const RsObservations& obs, const camera::CameraMo
     Jet uv[2];
     if (!ProjectAtSpanTime(basis, cam, point_w, c, Jet(e.time_s - basis.span_start, 0), uv))
       continue;
-    detail::SetWeightedError(obs.uv.row(m).transpose(), Eigen::Vector2d(uv[0].a, uv[1].a),
-                             Eigen::Vector2d(uv[0].v[0], uv[1].v[0]), line_delay_s,
-                             options.standardise_errors, options.pixel_sigma, options.max_rs_gain,
-                             &e);
+    detail::SetWeightedError(
+        obs.uv.row(m).transpose(), Eigen::Vector2d(uv[0].a, uv[1].a),
+        Eigen::Vector2d(uv[0].v[0], uv[1].v[0]), line_delay_s, options.standardise_errors,
+        options.observation_sigma.size() > 0 ? options.observation_sigma[m] : options.pixel_sigma,
+        options.max_rs_gain, &e);
   }
   return out;
 }
@@ -77,6 +78,12 @@ void Validate(const RsObservations& obs, const camera::CameraModel& camera,
   if (trajectory.dimension() != geometry::kPoseStateDim)
     throw InputError("the trajectory must be a 6-D pose spline [p; phi]");
   detail::ValidateNoiseOptions(options.pixel_sigma, options.max_rs_gain);
+  if (options.observation_sigma.size() > 0) {
+    if (options.observation_sigma.size() != m)
+      throw InputError("observation_sigma must have one value per observation (or none)");
+    if (!(options.observation_sigma.array() > 0.0).all() || !options.observation_sigma.allFinite())
+      throw InputError("observation_sigma must be positive and finite");
+  }
   if ((options.motion_prior_q.array() <= 0.0).any())
     throw InputError("motion prior Q must be positive");
   detail::ValidateRobustLoss(options.robust_loss);

@@ -7,11 +7,25 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 
 from ..errors import InputError
 from .common import EXIT_OK, EXIT_UNDETERMINED
+
+# `rscalib linedelay` exit codes (README: exit codes): 0 trusted, 2 bad input, 3 undetermined, and
+EXIT_NOT_TRUSTED = 4     # estimated, but a check failed (the report says which); results written
+EXIT_INTERNAL = 1        # an unexpected error (one line; RSCALIB_DEBUG=1 shows the traceback)
+EXIT_CODES_HELP = ("exit codes: 0 the line delay is estimated and every check passed (trust it); "
+                   "2 bad input (one line on stderr); 3 the video does not determine the line delay (results "
+                   "written, no number claimed); 4 estimated but not trusted: a check failed (J/2N, the halves' "
+                   "self-check, coverage, uncertainty; the report says which and what to film differently); "
+                   "1 internal error")
+
+# engine words -> the flags a CLI user can type
+_FLAG_WORDS = (("robust_loss='huber'", "--robust huber"), ("lower min_segment_s", "lower --min-segment-ms"),
+               ("min_segment_s", "--min-segment-ms"), ("pixel_sigma", "--pixel-sigma"))
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -32,9 +46,23 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 def add_parser(sub) -> None:
     p = sub.add_parser("linedelay", help="estimate the rolling-shutter line delay from a video of a target",
                        description="Detect the target in every frame, estimate the continuous-time trajectory and "
-                                   "the line delay jointly, and write result.json, report.html, plots, the "
-                                   "trajectory and camera files with the line delay (OpenCV, Kalibr, Gyroflow).")
+                                   "the line delay jointly, check it on the two halves of the video, and write "
+                                   "result.json, report.html (with advice on filming), plots, the trajectory and "
+                                   "camera files with the line delay (OpenCV, Kalibr, Gyroflow).",
+                       epilog=EXIT_CODES_HELP)
     _add_common(p)
+    p.add_argument("--start", type=float, default=None, metavar="S", help="use frames from S seconds on")
+    p.add_argument("--end", type=float, default=None, metavar="S", help="use frames up to S seconds")
+    p.add_argument("--readout", choices=["auto", "top-down", "bottom-up", "left-right", "right-left"], default="auto",
+                   help="sensor readout direction in the image (auto: top-down, or from a portrait video's rotation "
+                        "metadata, which turns sensor rows into image columns)")
+    p.add_argument("--min-segment-ms", type=float, default=None, metavar="MS",
+                   help="shortest knot segment the adaptation may create (default: half a frame, at most 16.7 ms)")
+    p.add_argument("--no-self-check", action="store_true",
+                   help="do not solve the two halves of the video separately (faster; the error bar is not checked)")
+    p.add_argument("--noise-model", choices=["frame", "video"], default="frame",
+                   help="frame: a sigma per frame plus repeating errors learnt from the residuals (default); "
+                        "video: one sigma for the whole video (the old model)")
     p.add_argument("--max-rounds", type=int, default=8, help="knot-adaptation rounds at most (8)")
     p.add_argument("--trajectory", choices=["spline", "linear"], default="spline",
                    help="trajectory model: the adaptive cubic B-spline (spline, default) or the baseline of "
@@ -70,6 +98,12 @@ def _check_flags(args) -> None:
         raise InputError("--max-rounds must be at least 1")
     if getattr(args, "line_delay", None) is not None and not math.isfinite(args.line_delay):
         raise InputError("--line-delay must be a finite number")
+    if getattr(args, "min_segment_ms", None) is not None and not args.min_segment_ms > 0:
+        raise InputError("--min-segment-ms must be positive")
+    for flag in ("start", "end"):
+        value = getattr(args, flag, None)
+        if value is not None and not math.isfinite(value):
+            raise InputError(f"--{flag} must be a number of seconds")
 
 
 def _say(args, text: str) -> None:
@@ -107,32 +141,66 @@ def _common_options(args, solving: str) -> dict:
                 on_round=_on_round(args))
 
 
+def in_flags(text: str) -> str:
+    """An engine's message in the words of the command line (its options as flags)."""
+    for word, flag in _FLAG_WORDS:
+        text = text.replace(word, flag)
+    return text
+
+
 def _print_warnings(summary: dict) -> None:
     for w in summary["warnings"]:
-        print(f"warning: {w}", file=sys.stderr)
+        print(f"warning: {in_flags(w)}", file=sys.stderr)
 
 
 def run_linedelay(args) -> int:
+    try:
+        return _run_linedelay(args)
+    except (InputError, KeyboardInterrupt):
+        raise
+    except Exception as error:  # noqa: BLE001 - never a traceback for a user
+        if os.environ.get("RSCALIB_DEBUG"):
+            raise
+        print(f"rscalib linedelay: internal error: {type(error).__name__}: {error} "
+              "(RSCALIB_DEBUG=1 shows where; please report it)", file=sys.stderr)
+        return EXIT_INTERNAL
+
+
+def _run_linedelay(args) -> int:
     from ..linedelay.pipeline import calibrate_video
-    from ..linedelay.report import write_video_outputs
+    from ..linedelay.report import NOT_TRUSTED, UNDETERMINED, write_video_outputs
 
     _check_flags(args)
     solving = ("estimating per-frame poses and line delay (linear interpolation):" if args.trajectory == "linear"
                else "estimating trajectory and line delay:")
     run = calibrate_video(args.video, args.target, args.camera, model=args.trajectory, max_rounds=args.max_rounds,
                           uniform_knots=args.uniform_knots, standardise_errors=not args.no_standardise,
-                          use_motion_prior=not args.no_motion_prior, **_common_options(args, solving))
+                          use_motion_prior=not args.no_motion_prior, start_s=args.start, end_s=args.end,
+                          readout=args.readout, self_check=not args.no_self_check,
+                          min_segment_s=None if args.min_segment_ms is None else args.min_segment_ms * 1e-3,
+                          noise_model=args.noise_model, **_common_options(args, solving))
     summary = write_video_outputs(run, args.out)
     result = run.result
-    std = result.line_delay_std_s
-    verdict = ("(linear-interpolation baseline)" if run.model == "linear"
-               else summary["verdict"]["headline"].split(": ")[-1])
-    print(f"line delay {result.line_delay_s * 1e6:.4f} +- {std * 1e6 if math.isfinite(std) else float('inf'):.4f} "
-          f"us/row, readout {result.readout_time_s * 1e3:.4f} ms; J/2N {result.normalised_cost:.3f}"
-          + (" " if run.model == "linear" else "; ") + verdict)
+    status = summary["verdict"]["status"]
+    if status == UNDETERMINED:
+        print("line delay: not determined by this video (results written; no number is claimed); "
+              + in_flags(summary["verdict"]["reasons"][0]))
+    else:
+        std = result.line_delay_std_s
+        verdict = ("(linear-interpolation baseline)" if run.model == "linear"
+                   else summary["verdict"]["headline"].split(": ")[-1])
+        print(f"line delay {result.line_delay_s * 1e6:.4f} +- {std * 1e6:.4f} us/row, readout "
+              f"{result.readout_time_s * 1e3:.4f} ms; J/2N {result.normalised_cost:.3f}"
+              + (" " if run.model == "linear" else "; ") + verdict)
+        for reason in summary["verdict"]["reasons"]:
+            print(f"  because: {in_flags(reason)}")
+    for advice in (summary.get("guidance") or {}).get("advice", []):
+        print(f"  to film better: {advice}")
     _print_warnings(summary)
     print(f"report: {Path(args.out) / 'report.html'}")
-    return EXIT_OK if run.determined else EXIT_UNDETERMINED
+    if status == UNDETERMINED:
+        return EXIT_UNDETERMINED
+    return EXIT_NOT_TRUSTED if status == NOT_TRUSTED else EXIT_OK
 
 
 def run_localize(args) -> int:

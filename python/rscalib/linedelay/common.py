@@ -85,21 +85,22 @@ def frame_rate_hz(observations: Observations) -> float:
 
 
 def assess_noise_and_determinacy(summary, sigma: float, sigma_source: str, nominal_delay_s: float,
-                                 warnings: list, *, estimate: bool = True) -> tuple[float, float, bool]:
+                                 warnings: list, *, estimate: bool = True,
+                                 std_s: Optional[float] = None) -> tuple[float, float, bool]:
     """(J/2N, pixel sigma, determined) of a solver summary (`_core.RsSolveSummary` or
     `LinearInterpSummary`), appending the warnings.
 
     The pixel sigma is replaced by the residual RMS when the grid gave no estimate (then J/2N carries
     no information, docs/formulation.md §8). d counts as determined when its covariance is full rank
     and sigma_d < UNDETERMINED_STD_FRACTION of the nominal full-frame delay (§9); with a known d
-    (estimate=False) it is not judged."""
+    (estimate=False) it is not judged. std_s: sigma_d to judge (default the solver's)."""
     cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
     if sigma_source == "residuals":
         sigma = summary.rms_px
         warnings.append("pixel sigma could not be estimated from the target grid; using the residual RMS "
                         f"({sigma:.3f} px), so J/2N carries no information")
     determined = True
-    std = summary.line_delay_std_s
+    std = summary.line_delay_std_s if std_s is None else std_s
     if estimate and not (summary.covariance_ok and math.isfinite(std)
                          and std < UNDETERMINED_STD_FRACTION * nominal_delay_s):
         determined = False

@@ -8,6 +8,9 @@ third differences over all frames therefore estimates sigma without any trajecto
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..observations import Observations
@@ -66,3 +69,111 @@ def estimate_pixel_sigma(observations: Observations, min_samples: int = 50) -> f
     if third.size < min_samples:
         return None
     return float(np.median(np.abs(third)) * _MAD_TO_SIGMA / np.sqrt(_THIRD_DIFFERENCE_VARIANCE))
+
+
+# --------------------------------------------------------------------------- the noise model of issue 12
+# Real detection noise changes from frame to frame (motion blur, compression, board distance), and
+# on a nearly still board it repeats from frame to frame (a fixed error pattern per corner that no
+# trajectory can fit). docs/formulation.md §8 describes the three parts below.
+
+# Frames with few third differences borrow strength from the video's sigma: a frame's variance is
+# the mean of its own n samples' and SHRINK_SAMPLES samples at the video's value.
+SHRINK_SAMPLES = 40
+# The lag-1 correlation used for the inflation is capped: beyond it the data carry almost no
+# independent information and the self-check / determinacy test decide.
+MAX_CORRELATION = 0.9
+
+
+def frame_pixel_sigma(observations: Observations, video_sigma: float,
+                      quadruples: np.ndarray | None = None) -> np.ndarray:
+    """(F,) detection-noise sigma of each frame (px): the robust scale of that frame's grid third
+    differences, shrunk towards `video_sigma` (the frame's n samples weigh against SHRINK_SAMPLES
+    samples at the video's value), so a blurred or badly compressed frame is down-weighted."""
+    if quadruples is None:
+        quadruples = grid_line_quadruples(observations.target_points)
+    sigma = np.full(observations.num_frames, float(video_sigma))
+    if len(quadruples) == 0 or observations.num_observations == 0:
+        return sigma
+    num_points = len(observations.target_points)
+    table = np.full((observations.num_frames, num_points, 2), np.nan)
+    table[observations.frame_index, observations.point_id] = observations.uv
+    a, b, c, d = (table[:, quadruples[:, k]] for k in range(4))
+    third = (d - 3.0 * c + 3.0 * b - a).reshape(observations.num_frames, -1)
+    for f in range(observations.num_frames):
+        x = third[f][np.isfinite(third[f])]
+        if x.size < 4:
+            continue
+        own = np.median(np.abs(x)) * _MAD_TO_SIGMA / np.sqrt(_THIRD_DIFFERENCE_VARIANCE)
+        n = x.size
+        sigma[f] = math.sqrt((n * own ** 2 + SHRINK_SAMPLES * video_sigma ** 2) / (n + SHRINK_SAMPLES))
+    return np.maximum(sigma, 1e-3)
+
+
+@dataclass
+class ResidualStructure:
+    """What the residuals of a solve say about the noise beyond the white per-frame part.
+
+    fixed_pattern_px: sigma (per coordinate) of an error that repeats for the same corner in the
+        next frame (a still board's detection bias): the square root of the lag-1 autocovariance of
+        the detrended residuals. It adds to every observation's variance.
+    correlation: lag-1 correlation of a corner's standardised residuals between consecutive
+        frames (0 for independent errors; near 1 when the same error repeats).
+    inflation: sqrt((1 + rho) / (1 - rho)) with rho = clip(correlation, 0, MAX_CORRELATION): the
+        factor by which correlated errors widen sigma_d (N frames carry the information of
+        N (1 - rho) / (1 + rho) independent ones, AR(1))."""
+
+    fixed_pattern_px: float
+    correlation: float
+    inflation: float
+    pairs: int
+
+
+def detrend_per_frame(observations: Observations, residual_px: np.ndarray, min_points: int = 8) -> np.ndarray:
+    """Residuals less, in each frame, their best affine function of (u, v): what a small pose error
+    of that frame would explain (a smooth field over the board) is removed, a corner's own error is
+    kept (scaled by sqrt(n / (n - 3)) for the 3 fitted values per coordinate). Frames with fewer than
+    min_points corners give NaN."""
+    residual = np.asarray(residual_px, dtype=np.float64)
+    out = np.full_like(residual, np.nan)
+    for rows in observations.frame_slices():
+        rows = rows[np.all(np.isfinite(residual[rows]), axis=1)]
+        if len(rows) < min_points:
+            continue
+        design = np.c_[np.ones(len(rows)), observations.uv[rows]]
+        design[:, 1:] -= design[:, 1:].mean(axis=0)
+        beta, *_ = np.linalg.lstsq(design, residual[rows], rcond=None)
+        out[rows] = (residual[rows] - design @ beta) * math.sqrt(len(rows) / (len(rows) - 3))
+    return out
+
+
+def residual_structure(observations: Observations, residual_px: np.ndarray, sigma_obs: np.ndarray
+                       ) -> ResidualStructure:
+    """The fixed pattern and the frame-to-frame correlation of a solve's residuals."""
+    residual = detrend_per_frame(observations, residual_px)
+    ok = np.all(np.isfinite(residual), axis=1)
+    frames = observations.frame_index
+    points = observations.point_id
+    num_points = len(observations.target_points)
+    key = frames * num_points + points
+    index = np.full(observations.num_frames * num_points, -1)
+    index[key[ok]] = np.flatnonzero(ok)
+    # consecutive used frames seeing the same corner
+    following = np.full(len(key), -1)
+    nxt = key + num_points
+    valid = ok & (frames + 1 < observations.num_frames)
+    following[valid] = index[nxt[valid]]
+    pair = following >= 0
+    std = residual / sigma_obs[:, None]
+    if pair.sum() >= 20:
+        a, b = std[pair], std[following[pair]]
+        correlation = float(np.sum(a * b) / math.sqrt(np.sum(a * a) * np.sum(b * b)))
+    else:
+        correlation = 0.0
+    # the repeating part: the lag-1 autocovariance of a corner's detrended residuals (px², per
+    # coordinate) is the variance of what the next frame repeats (white noise contributes nothing)
+    fixed = 0.0
+    if pair.sum() >= 20:
+        ra, rb = residual[pair], residual[following[pair]]
+        fixed = math.sqrt(max(0.0, float(np.mean(ra * rb))))
+    rho = min(max(correlation, 0.0), MAX_CORRELATION)
+    return ResidualStructure(fixed, correlation, math.sqrt((1.0 + rho) / (1.0 - rho)), int(pair.sum()))

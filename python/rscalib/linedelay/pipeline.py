@@ -22,13 +22,18 @@ import numpy as np
 
 from .._core import CameraModel
 from .._progress import ProgressArg
+from ..detection import probe
 from ..detection.pipeline import detect_video
 from ..detection.result import DetectionResult
 from ..errors import InputError
 from ..io.cameras import load_camera
 from ..io.targets import Target, load_target
+from . import selfcheck
+from .common import UNDETERMINED_STD_FRACTION, frame_rate_hz
+from .guidance import capture_guidance
 from .linear import LinearInterpResult, calibrate_line_delay_linear
 from .pnp import PnpTrajectory, compare_with_pnp, pnp_trajectory
+from .readout import READOUTS, rotation_hint, time_window, to_top_down
 from .spline import LineDelayResult, RoundRecord, calibrate_line_delay, localize
 
 TRAJECTORY_MODELS = ("spline", "linear")    # calibrate_video: `rscalib linedelay --trajectory`
@@ -57,6 +62,7 @@ class VideoResult:
     inputs: dict
     settings: dict = field(default_factory=dict)
     comparison: Optional[dict] = None
+    guidance: Optional[dict] = None   # linedelay.guidance.capture_guidance (linedelay runs)
 
     @property
     def command(self) -> str:
@@ -80,7 +86,8 @@ class VideoResult:
         """The result.json fields of the video and its detection, then the model's settings."""
         d = self.detection
         return {"video": self.inputs["video"], "detection_dropped": d.dropped, "frames_detected": d.frames_detected,
-                "timestamps_from": d.timestamps, "detection_time_s": d.detect_time_s} | self.settings
+                "timestamps_from": d.timestamps, "detection_time_s": d.detect_time_s} | self.settings \
+            | ({"guidance": self.guidance} if self.guidance is not None else {})
 
 
 def check_files(video: PathLike, target: PathLike, camera: PathLike) -> None:
@@ -101,6 +108,7 @@ def detect(video: PathLike, target: Union[Target, PathLike], camera: CameraModel
     if not isinstance(target, Target):
         target = load_target(target)
     detection = detect_video(video, target, workers=workers, cache=cache, cache_dir=cache_dir, progress=progress)
+    check_target_matches(video, target, detection)
     if detection.observations.num_observations == 0:
         raise InputError(f"the target was not detected in any of the {detection.frames_total} frames "
                          "(wrong target file or size?)")
@@ -115,17 +123,28 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
                     max_rounds: int = 8, uniform_knots: Optional[int] = None, standardise_errors: bool = True,
                     use_motion_prior: bool = True, workers: Optional[int] = None, cache: bool = True,
                     cache_dir: Optional[PathLike] = None, progress: ProgressArg = False,
-                    on_detection: DetectionCallback = None, on_round: RoundCallback = None) -> VideoResult:
+                    on_detection: DetectionCallback = None, on_round: RoundCallback = None,
+                    start_s: Optional[float] = None, end_s: Optional[float] = None, readout: str = "auto",
+                    self_check: bool = True, min_segment_s: Optional[float] = None,
+                    noise_model: str = "frame") -> VideoResult:
     """The line delay of a video of a target (`rscalib linedelay`).
 
     video: file or image folder; target, camera: their files (target YAML; OpenCV or Kalibr camera).
     model: "spline" (calibrate_line_delay: the adaptive B-spline, Oth et al. 2013) or "linear"
     (calibrate_line_delay_linear: per-frame poses, Hedborg et al. 2012). uniform_knots,
     standardise_errors=False and use_motion_prior=False apply to the spline only. rows, pixel_sigma,
-    robust_loss, max_rounds: as the engines'. workers, cache, cache_dir: detection (detect_video)."""
+    robust_loss, max_rounds: as the engines'. workers, cache, cache_dir: detection (detect_video).
+    start_s, end_s: use the frames in this time window only. readout: the sensor's readout direction
+    (linedelay.readout.READOUTS) or "auto" (top-down, unless the video's rotation metadata says the
+    picture was turned). self_check: also solve the two halves (linedelay.selfcheck; spline only) and
+    widen sigma_d by its rule. min_segment_s, noise_model: calibrate_line_delay's."""
     if model not in TRAJECTORY_MODELS:
         raise InputError(f"unknown trajectory model {model!r}; one of {', '.join(TRAJECTORY_MODELS)}")
     check_files(video, target, camera)
+    if readout != "auto" and readout not in READOUTS:
+        raise InputError(f"unknown readout direction {readout!r} (auto, {', '.join(READOUTS)})")
+    if min_segment_s is not None and not min_segment_s > 0:
+        raise InputError("the shortest knot segment must be positive")
     if model == "linear":
         spline_only = [name for name, used in (("uniform knots", uniform_knots is not None),
                                                ("unstandardised errors", not standardise_errors),
@@ -135,21 +154,49 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
                              "knots, no motion prior and unstandardised errors)")
     camera_model = load_camera(camera).camera
     detection = _detections(video, target, camera_model, workers, cache, cache_dir, progress, on_detection)
-    observations = detection.observations
+    notes = list(detection.warnings)
+    observations = time_window(detection.observations, start_s, end_s)
+    if readout == "auto":
+        hint = rotation_hint(video)
+        readout = hint or "top-down"
+        if hint:
+            notes.append(f"the video's rotation metadata turns the picture, so the sensor rows are not the image "
+                         f"rows: readout {hint} assumed (override with --readout)")
+    observations, solve_camera = to_top_down(observations, camera_model, readout)
     if model == "linear":
-        result = calibrate_line_delay_linear(observations, camera_model, rows, pixel_sigma=pixel_sigma,
+        result = calibrate_line_delay_linear(observations, solve_camera, rows, pixel_sigma=pixel_sigma,
                                              robust_loss=robust_loss)
         settings = {}
     else:
         knots = {} if uniform_knots is None else {"num_segments": uniform_knots, "adaptive_knots": False}
-        result = calibrate_line_delay(observations, camera_model, rows, pixel_sigma=pixel_sigma,
-                                      robust_loss=robust_loss, max_rounds=max_rounds,
-                                      standardise_errors=standardise_errors, use_motion_prior=use_motion_prior,
-                                      progress=on_round, **knots)
+        options = dict(pixel_sigma=pixel_sigma, robust_loss=robust_loss, max_rounds=max_rounds,
+                       standardise_errors=standardise_errors, use_motion_prior=use_motion_prior,
+                       min_segment_s=min_segment_s, noise_model=noise_model, **knots)
+        result = calibrate_line_delay(observations, solve_camera, rows, progress=on_round, **options)
+        if self_check:
+            check = selfcheck.halves(result.used_observations,
+                                     lambda half: calibrate_line_delay(half, solve_camera, result.rows, **options))
+            result.self_check = check
+            result.line_delay_std_s = selfcheck.widened_std(result.line_delay_std_s, check)
+            if check.get("widen", 1.0) > 1.0:
+                result.warnings.append(f"the halves of the video differ by {check['z']:.1f} of their sigma: "
+                                       f"sigma_d widened x{check['widen']:.2f} (self-check rule)")
+                nominal = 1.0 / (frame_rate_hz(result.used_observations) * result.rows)
+                if result.determined and not result.line_delay_std_s < UNDETERMINED_STD_FRACTION * nominal:
+                    result.determined = False
+                    result.warnings.append("with the widened error bar the line delay is not determined "
+                                           f"(sigma_d >= {UNDETERMINED_STD_FRACTION * 100:g} % of a frame's readout)")
         settings = {"trajectory_model": "spline", "standardise_errors": standardise_errors,
-                    "motion_prior": use_motion_prior, "adaptive_knots": uniform_knots is None}
-    result.warnings[:0] = list(detection.warnings)
-    return VideoResult(model, result, camera_model, detection, _inputs(video, target, camera), settings)
+                    "motion_prior": use_motion_prior, "adaptive_knots": uniform_knots is None,
+                    "noise_model": noise_model}
+    settings |= {"readout": readout, "start_s": start_s, "end_s": end_s}
+    result.warnings[:0] = notes
+    run = VideoResult(model, result, camera_model, detection, _inputs(video, target, camera), settings)
+    try:
+        run.guidance = capture_guidance(result, detection)
+    except Exception as error:  # noqa: BLE001 - advice must never cost the result
+        run.guidance = {"advice": [], "error": f"{type(error).__name__}: {error}"}
+    return run
 
 
 def localize_video(video: PathLike, target: PathLike, camera: PathLike, *, model: str = "rs-spline",
@@ -185,6 +232,31 @@ def localize_video(video: PathLike, target: PathLike, camera: PathLike, *, model
     result.warnings[:0] = list(detection.warnings)
     return VideoResult(model, result, camera_model, detection, inputs,
                        comparison=compare_with_pnp(result, camera_model))
+
+
+def check_target_matches(video: PathLike, target: Target, detection: DetectionResult) -> None:
+    """InputError (one line, with what the frames seem to show) when a checkerboard target file does
+    not match the filmed board: detected in few frames, or a larger board is visible in the frames
+    where the declared one was found (detection.probe)."""
+    if target.target_type != "checkerboard" or detection.frames_total == 0:
+        return
+    rows, cols = target.grid_shape
+    few = detection.frames_detected < 0.5 * detection.frames_total
+    numbers = (np.arange(detection.frames_total) if few or detection.frames_detected == 0
+               else detection.frame_numbers)
+    try:
+        frames = probe.sample_frames(video, numbers, limit=4 if few else 3)
+    except (InputError, OSError):
+        return
+    if not frames:
+        return
+    if few or probe.larger_board_visible(frames, cols, rows):
+        seen = probe.largest_board(frames)
+        if seen is not None and sorted(seen) == sorted((cols, rows)):
+            return  # the declared board is there; it was just hard to detect
+        if seen is None and not few:
+            return
+        raise InputError(probe.mismatch_message(target, seen))
 
 
 def _detections(video, target, camera: CameraModel, workers, cache, cache_dir, progress,

@@ -39,26 +39,51 @@ Estimate = Union[LineDelayResult, LinearInterpResult]
 TRAJECTORY_HEADER = "t_s,p_x_m,p_y_m,p_z_m,phi_x_rad,phi_y_rad,phi_z_rad"
 
 
+# The verdicts of a line-delay estimate and their exit codes (`rscalib linedelay --help`, README).
+TRUSTED, NOT_TRUSTED, UNDETERMINED = "trusted", "not trusted", "undetermined"
+
+
 @dataclass
 class Verdict:
     trust: bool
     reasons: list[str]     # why not (or caveats)
     headline: str
+    status: str = TRUSTED  # TRUSTED | NOT_TRUSTED | UNDETERMINED
+
+
+def _us(x: float) -> str:
+    return f"{x * 1e6:.3f}" if math.isfinite(x) else "?"
 
 
 def verdict(result: Estimate) -> Verdict:
+    """trusted (every check passed), not trusted (estimated, but a check failed: the reasons say
+    which) or undetermined (the data do not determine d: no number is given)."""
     reasons = []
     if not result.determined:
-        reasons.append("the data do not determine the line delay (too little motion)")
+        why = ("the covariance of d is rank deficient" if not math.isfinite(result.line_delay_std_s)
+               else f"sigma_d = {_us(result.line_delay_std_s)} us/row is too large")
+        return Verdict(False, [f"the data do not determine the line delay ({why}): too little motion, or the wrong "
+                               "kind (move the camera faster, mostly rotating about its vertical axis)"],
+                       "Line delay not determined by this video.", UNDETERMINED)
     if not 0.7 <= result.normalised_cost <= 1.5:
         reasons.append(f"J/2N = {result.normalised_cost:.2f} is far from 1: the noise model does not fit "
-                       "(outliers, wrong intrinsics, or a wrong pixel sigma)")
+                       "(wrong intrinsics first of all, then outliers or motion the trajectory cannot follow)")
     if result.frames_used < 0.3 * result.frames_total:
         reasons.append(f"only {result.frames_used} of {result.frames_total} frames were usable")
     rows_seen = result.used_observations.uv[:, 1]
     span = (np.percentile(rows_seen, 98) - np.percentile(rows_seen, 2)) / result.rows if len(rows_seen) else 0
     if span < 0.4:
         reasons.append(f"the target covered only {span * 100:.0f} % of the image rows; move it over the whole frame")
+    check = getattr(result, "self_check", None)
+    if check is not None:
+        if check.get("agree") is False:
+            h = check["halves"]
+            reasons.append(f"the two halves of the video disagree: {_us(h[0]['line_delay_s'])} ± "
+                           f"{_us(h[0]['line_delay_std_s'])} vs {_us(h[1]['line_delay_s'])} ± "
+                           f"{_us(h[1]['line_delay_std_s'])} us/row ({check['z']:.1f} sigma); the error bar is "
+                           f"widened x{check['widen']:.1f}")
+        elif check.get("agree") is None:
+            reasons.append("self-check inconclusive: " + check.get("reason", "a half could not be solved"))
     if math.isfinite(result.line_delay_std_s) and result.line_delay_s != 0 and \
             result.line_delay_std_s > 0.02 * abs(result.line_delay_s):
         reasons.append(f"the uncertainty is {result.line_delay_std_s / abs(result.line_delay_s) * 100:.1f} % of "
@@ -66,10 +91,10 @@ def verdict(result: Estimate) -> Verdict:
     if not result.converged:
         reasons.append("the solver did not report convergence")
     trust = not reasons
-    d_us, s_us = result.line_delay_s * 1e6, result.line_delay_std_s * 1e6
-    headline = (f"Line delay {d_us:.3f} ± {s_us:.3f} µs/row (readout {result.readout_time_s * 1e3:.3f} ms): "
-                + ("trust it." if trust else "do not trust it yet."))
-    return Verdict(trust, reasons, headline)
+    headline = (f"Line delay {_us(result.line_delay_s)} ± {_us(result.line_delay_std_s)} µs/row "
+                f"(readout {result.readout_time_s * 1e3:.3f} ms): "
+                + ("trust it." if trust else "estimated, but do not trust it yet."))
+    return Verdict(trust, reasons, headline, TRUSTED if trust else NOT_TRUSTED)
 
 
 # ------------------------------------------------------------------------------- trajectories
@@ -244,21 +269,25 @@ def plot_trajectory(result: Estimate, path: Path) -> Path:
     return _save(fig, path)
 
 
-def _plots(result: Estimate, out: Path) -> dict:
+def _plots(result: Estimate, out: Path, failed: list) -> dict:
     """The report's plots of a line-delay estimate, {caption: path}: residuals and trajectory for
     both models; the spline's error ellipses, knot density and rounds besides (the linear model has
     no knots, no rounds and, by default, unstandardised errors)."""
-    plots = {
-        "residuals over time": plot_residuals_time(result, out / "residuals_time.png"),
-        "residuals over the image and target coverage": plot_residuals_image(result, out / "residuals_image.png"),
-    }
+    jobs = [("residuals over time", plot_residuals_time, "residuals_time.png"),
+            ("residuals over the image and target coverage", plot_residuals_image, "residuals_image.png")]
     if isinstance(result, LineDelayResult):
-        plots |= {
-            "error covariance ellipses (paper Fig. 2)": plot_covariance_ellipses(result, out / "covariance_ellipses.png"),
-            "knot density and image motion": plot_knots_and_speed(result, out / "knots_speed.png"),
-            "line delay per knot-adaptation round": plot_rounds(result, out / "rounds.png"),
-        }
-    plots["trajectory"] = plot_trajectory(result, out / "trajectory.png")
+        jobs += [("error covariance ellipses (paper Fig. 2)", plot_covariance_ellipses, "covariance_ellipses.png"),
+                 ("knot density and image motion", plot_knots_and_speed, "knots_speed.png"),
+                 ("line delay per knot-adaptation round", plot_rounds, "rounds.png")]
+    jobs.append(("trajectory", plot_trajectory, "trajectory.png"))
+    plots = {}
+    for caption, plot, name in jobs:
+        # a plot of degenerate data (NaN, infinite sigma) must not cost the user the result
+        try:
+            plots[caption] = plot(result, out / name)
+        except Exception as error:  # noqa: BLE001
+            plt.close("all")
+            failed.append(f"plot {name} skipped: {type(error).__name__}: {error}")
     return plots
 
 
@@ -285,14 +314,14 @@ def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_tota
     result.json fields; fps: for the Gyroflow profile; command, inputs: the provenance."""
     out, summary = _start(result, out_dir, frames_total, extra)
     v = verdict(result)
-    summary["verdict"] = {"trust": v.trust, "headline": v.headline, "reasons": v.reasons}
+    summary["verdict"] = {"trust": v.trust, "status": v.status, "headline": v.headline, "reasons": v.reasons}
     warnings = list(summary["warnings"])
 
     files = {"trajectory_csv": write_trajectory_csv(result, out / "trajectory.csv").name}
     camera_files, camera_warnings = write_camera_set(camera, out, result.line_delay_s, fps=fps, rms_px=result.rms_px)
     files |= camera_files
     warnings += camera_warnings
-    plots = _plots(result, out)
+    plots = _plots(result, out, warnings)
     files["plots"] = [p.name for p in plots.values()]
     files["report"] = "report.html"
     summary["warnings"] = warnings
@@ -359,8 +388,13 @@ def _table_rows(summary: dict) -> list[tuple[str, object]]:
                 f"{summary['knots']} / {summary['segments']} / {summary['chains']}")
     else:
         size = ("knot segments", summary["segments"])
-    return [("line delay", f"{summary['line_delay_s'] * 1e6:.4f} µs/row"),
-            ("standard deviation", "—" if std is None else f"{std * 1e6:.4f} µs/row"),
+    if (summary.get("verdict") or {}).get("status") == UNDETERMINED:
+        value, spread = "not determined", "—"
+    else:
+        value = f"{summary['line_delay_s'] * 1e6:.4f} µs/row"
+        spread = "—" if std is None else f"{std * 1e6:.4f} µs/row"
+    return [("line delay", value),
+            ("standard deviation", spread),
             ("readout time", f"{summary['readout_time_s'] * 1e3:.4f} ms ({summary['rows']} rows)"),
             ("frames used / total", f"{summary['frames_used']} / {summary['frames_total']}"),
             ("observations", summary["observations"]),
@@ -372,12 +406,44 @@ def _table_rows(summary: dict) -> list[tuple[str, object]]:
             ("solve time", f"{summary['solve_time_s']:.2f} s")]
 
 
+def _fact(value) -> str:
+    if isinstance(value, dict):
+        return ", ".join(f"{k} {_fact(v)}" for k, v in value.items())
+    if isinstance(value, float):
+        return f"{value:.3g}"
+    return str(value)
+
+
+def _half(h: dict) -> str:
+    span = f"{h.get('t_begin_s') or 0:.2f}–{h.get('t_end_s') or 0:.2f} s"
+    if "error" in h:
+        return f"{span}: {h['error']}"
+    std = h.get("line_delay_std_s")
+    return (f"{span}: {h['line_delay_s'] * 1e6:.3f} ± {'?' if std is None else f'{std * 1e6:.3f}'} µs/row"
+            + ("" if h.get("determined") else " (not determined)"))
+
+
 def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict) -> None:
     table = "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(val))}</td></tr>"
                     for k, val in _table_rows(summary))
     reasons = "".join(f"<li>{html.escape(r)}</li>" for r in v.reasons)
     warnings = "".join(f"<li>{html.escape(w)}</li>" for w in summary["warnings"])
     figures = "".join(f"<figure>{_img(p)}<figcaption>{html.escape(name)}</figcaption></figure>" for name, p in plots.items())
+    guidance = summary.get("guidance") or {}
+    advice = "".join(f"<li>{html.escape(a)}</li>" for a in guidance.get("advice", []))
+    facts = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(_fact(v))}</td></tr>"
+                    for k, v in guidance.items() if k != "advice")
+    guidance_html = ("<h2>How the video could be better</h2>" + (f"<ul>{advice}</ul>" if advice else
+                     "<p>Nothing to change: coverage, motion, blur and drops are fine.</p>")
+                     + f"<table>{facts}</table>") if guidance else ""
+    check = summary.get("self_check")
+    check_html = ""
+    if check:
+        halves = "".join(f"<li>{html.escape(_half(h))}</li>" for h in check.get("halves", []))
+        state = {True: "agree", False: "disagree", None: "inconclusive"}[check.get("agree")]
+        z = "" if check.get("z") is None else f" (z = {check['z']:.2f})"
+        check_html = (f"<h2>Self-check: the two halves {state}{html.escape(z)}</h2><ul>{halves}</ul>"
+                      f"<p>{html.escape(check.get('rule', ''))}</p>")
     files = ", ".join(["result.json"] + [summary["files"][role] + note for role, note in _FILE_NOTES
                                          if role in summary["files"]])
     color = "#1a7f37" if v.trust else "#b35900"
@@ -389,6 +455,8 @@ figure{{margin:1.5em 0}}img{{max-width:100%}}figcaption{{color:#555;font-size:90
 <h1>{html.escape(title)}</h1>
 <div class="verdict"><strong>{html.escape(v.headline)}</strong>{'<ul>' + reasons + '</ul>' if reasons else ''}</div>
 <h2>Result</h2><table>{table}</table>
+{check_html}
+{guidance_html}
 {'<h2>Warnings</h2><ul>' + warnings + '</ul>' if warnings else ''}
 <h2>Plots</h2>{figures}
 <p>Files: {html.escape(files)}. Conventions: row 0 of a frame is exposed at its timestamp, row v at t + v·d.</p>

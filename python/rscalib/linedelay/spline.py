@@ -18,6 +18,7 @@ from .. import _core
 from .._core import BSpline, CameraModel
 from ..errors import InputError
 from ..observations import Observations
+from . import noise
 from .common import (
     assess_noise_and_determinacy,
     choose_pixel_sigma,
@@ -33,6 +34,7 @@ from .pnp import FramePoses
 # kept as PAPER_MOTION_PRIOR_Q; with errors standardised in pixels they bias d (docs/formulation.md).
 DEFAULT_MOTION_PRIOR_Q = (1.0, 1.0, 1.0, 1e2, 1e2, 1e2)
 PAPER_MOTION_PRIOR_Q = (1e-5, 1e-5, 1e-5, 1e-2, 1e-2, 1e-2)
+NOISE_MODELS = ("frame", "video")
 # Rounds before the last are re-solved after knot insertion anyway: solve them loosely.
 _ROUND_MAX_ITERATIONS = 30
 _ROUND_FUNCTION_TOLERANCE = 1e-6
@@ -85,6 +87,12 @@ class LineDelayResult:
     standardised_sq: np.ndarray       # (M,) squared standardised error
     frame_poses: FramePoses           # the GS PnP initial guess / baseline
     used_observations: Observations = field(repr=False)
+    # The noise model (docs/formulation.md §8): per-observation sigma (px) used in the final solve,
+    # the fixed-pattern part, the frame-to-frame correlation and the resulting inflation of sigma_d.
+    observation_sigma_px: Optional[np.ndarray] = field(default=None, repr=False)
+    noise: dict = field(default_factory=dict)
+    solver_line_delay_std_s: float = float("nan")   # sigma_d of the solver, before any inflation
+    self_check: Optional[dict] = None                # the halves' check (linedelay.selfcheck), if run
 
     @property
     def num_segments(self) -> int:
@@ -92,10 +100,16 @@ class LineDelayResult:
 
     def summary_dict(self) -> dict:
         """JSON-ready fields (the result.json of `rscalib linedelay`, docs/architecture.md)."""
-        return summary_fields(self, len(self.knots)) | {
+        extra = {"solver_line_delay_std_s": _finite_or_none(self.solver_line_delay_std_s),
+                 "noise": self.noise, "self_check": self.self_check}
+        return summary_fields(self, len(self.knots)) | extra | {
             "history": [vars(r) | {"line_delay_std_s": r.line_delay_std_s if math.isfinite(r.line_delay_std_s) else None}
                         for r in self.history],
         }
+
+
+def _finite_or_none(x: float) -> Optional[float]:
+    return float(x) if math.isfinite(x) else None
 
 
 def _solver_options(pixel_sigma: float, *, estimate_line_delay: bool, standardise_errors: bool,
@@ -134,14 +148,17 @@ def initial_trajectory(observations: Observations, poses: FramePoses, line_delay
 
 
 def _split_segments(trajectory: BSpline, segment_cost, segment_count, min_segment_s: float,
-                    margin_sigmas: float) -> tuple[list[float], int]:
-    """Midpoints of the segments with J_j >= 2 N_j + margin * sqrt(4 N_j) (paper §4.3 step 5
+                    margin_sigmas: float, correlation: float = 0.0) -> tuple[list[float], int]:
+    """Midpoints of the segments with J_j >= 2 N_j + margin * sqrt(4 N_j c) (paper §4.3 step 5
     with margin 0) that are long enough to halve, and the number of segments over that
-    threshold but already at the density cap."""
+    threshold but already at the density cap. c = (1 + rho²) / (1 - rho²) is the variance
+    inflation of a sum of squares of errors correlated rho from frame to frame (1 when independent)."""
     breaks = trajectory.breakpoints
+    rho = min(max(correlation, 0.0), noise.MAX_CORRELATION)
+    spread = (1.0 + rho * rho) / (1.0 - rho * rho)
     new_knots, at_cap = [], 0
     for j, (cost, count) in enumerate(zip(segment_cost, segment_count)):
-        if count > 0 and cost >= 2.0 * count + margin_sigmas * math.sqrt(4.0 * count):
+        if count > 0 and cost >= 2.0 * count + margin_sigmas * math.sqrt(4.0 * count * spread):
             if breaks[j + 1] - breaks[j] >= 2.0 * min_segment_s:
                 new_knots.append(0.5 * (breaks[j] + breaks[j + 1]))
             else:
@@ -163,6 +180,7 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                          motion_prior_q=DEFAULT_MOTION_PRIOR_Q,
                          robust_loss: str = "none",
                          num_threads: int = 2,
+                         noise_model: str = "frame",
                          progress: Optional[Callable[[RoundRecord], None]] = None) -> LineDelayResult:
     """Estimate the line delay d (s/row) and the continuous-time trajectory (Oth et al. 2013 §3-4).
 
@@ -174,6 +192,9 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
     knots to start from (default fps/4 but at least 7.5, deliberately too few). split_margin_sigmas:
     a segment splits when J_j >= 2 N_j + margin * sqrt(4 N_j); 0 is the paper's rule, which
     also splits ~1/3 of well-modelled segments by chance (docs/formulation.md §7).
+    noise_model: "frame" (default: a sigma per frame, a fixed error pattern and frame-to-frame
+    correlation learnt from the residuals, docs/formulation.md §8) or "video" (one sigma for the
+    whole video, the model before issue 12; for experiments).
     progress: called after each round.
     """
     return _run(observations, camera, rows, estimate=True, pixel_sigma=pixel_sigma,
@@ -182,7 +203,7 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                 min_segment_s=min_segment_s, split_margin_sigmas=split_margin_sigmas,
                 standardise_errors=standardise_errors,
                 use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
-                robust_loss=robust_loss, num_threads=num_threads, progress=progress)
+                robust_loss=robust_loss, num_threads=num_threads, noise_model=noise_model, progress=progress)
 
 
 def localize(observations: Observations, camera: CameraModel, rows: Optional[int] = None,
@@ -197,8 +218,10 @@ def localize(observations: Observations, camera: CameraModel, rows: Optional[int
 def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s=None,
          initial_segments_per_s=None, num_segments=None, adaptive_knots=True, max_rounds=8,
          min_segment_s=None, split_margin_sigmas=2.0, standardise_errors=True, use_motion_prior=True,
-         motion_prior_q=DEFAULT_MOTION_PRIOR_Q, robust_loss="none", num_threads=2,
+         motion_prior_q=DEFAULT_MOTION_PRIOR_Q, robust_loss="none", num_threads=2, noise_model="frame",
          progress=None) -> LineDelayResult:
+    if noise_model not in NOISE_MODELS:
+        raise InputError(f"unknown noise model {noise_model!r} ({', '.join(NOISE_MODELS)})")
     started = time.perf_counter()
     rows, fps, nominal_delay_s, d = initial_values(observations, camera, rows, line_delay_s)
     warnings: list[str] = []
@@ -225,6 +248,24 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     options = _solver_options(sigma, estimate_line_delay=estimate, standardise_errors=standardise_errors,
                               use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
                               robust_loss=robust_loss, num_threads=num_threads, compute_covariance=False)
+    # The noise model (docs/formulation.md §8): white noise per frame from the grid, plus what the
+    # residuals show after each round (a fixed pattern per corner, frame-to-frame correlation).
+    # Without RsSolverOptions.observation_sigma (an older _core) the white part is one sigma for all.
+    per_frame = noise_model == "frame" and sigma_source == "grid third differences"
+    weights_per_observation = per_frame and hasattr(options, "observation_sigma")
+    white = (noise.frame_pixel_sigma(used, sigma)[used.frame_index] if weights_per_observation
+             else np.full(used.num_observations, sigma))
+    structure = noise.ResidualStructure(0.0, 0.0, 1.0, 0)
+    obs_sigma = white
+
+    def use_sigma(values: np.ndarray) -> None:
+        if weights_per_observation:
+            options.observation_sigma = values
+        else:
+            options.pixel_sigma = float(values[0])
+
+    if per_frame:
+        use_sigma(obs_sigma)
     args = (used.frame_times_s[used.frame_index], used.uv, used.points_w(), camera)
     history: list[RoundRecord] = []
     adapted = not adaptive_knots
@@ -236,8 +277,19 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         summary = _core.solve_line_delay(*args, trajectory, d, options)
         d = summary.line_delay_s
         cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
-        new_knots, at_cap = _split_segments(trajectory, summary.segment_cost, summary.segment_count,
-                                            min_segment_s, split_margin_sigmas) if adaptive_knots else ([], 0)
+        segment_cost = summary.segment_cost
+        if per_frame:
+            # what the residuals say beyond the white part; the split test sees errors weighted by it
+            structure = noise.residual_structure(used, np.asarray(summary.residual_px), white)
+            new_sigma = np.sqrt(white ** 2 + structure.fixed_pattern_px ** 2)
+            sq = np.asarray(summary.standardised_sq) * (obs_sigma / new_sigma) ** 2
+            segment_cost = _segment_sums(trajectory, np.asarray(summary.observation_time_s), sq,
+                                         len(summary.segment_cost))
+            obs_sigma = new_sigma
+            use_sigma(obs_sigma)
+        new_knots, at_cap = _split_segments(trajectory, segment_cost, summary.segment_count,
+                                            min_segment_s, split_margin_sigmas,
+                                            structure.correlation) if adaptive_knots else ([], 0)
         record = RoundRecord(round_index, trajectory.num_segments, d, float("nan"), cost, summary.rms_px,
                              0 if last_chance else len(new_knots), at_cap, summary.iterations,
                              summary.solve_time_s)
@@ -261,14 +313,28 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     options.compute_covariance = estimate
     summary = _core.solve_line_delay(*args, trajectory, d, options)
     d = summary.line_delay_s
-    std = summary.line_delay_std_s if estimate else 0.0
+    if per_frame:
+        structure = noise.residual_structure(used, np.asarray(summary.residual_px), white)
+    solver_std = summary.line_delay_std_s if estimate else 0.0
+    # correlated errors carry less information than their number says (AR(1) effective sample size)
+    std = solver_std * structure.inflation if estimate else 0.0
     history[-1].line_delay_s = d
     history[-1].line_delay_std_s = std
     history[-1].iterations += summary.iterations
     history[-1].solve_time_s += summary.solve_time_s
 
     cost, sigma, determined = assess_noise_and_determinacy(summary, sigma, sigma_source, nominal_delay_s, warnings,
-                                                           estimate=estimate)
+                                                           estimate=estimate, std_s=std)
+    noise_summary = {"model": ("per frame" if weights_per_observation else "one white sigma + residual structure")
+                     if per_frame else "one sigma for the video",
+                     "white_sigma_px": {"median": float(np.median(white)), "p10": float(np.percentile(white, 10)),
+                                        "p90": float(np.percentile(white, 90))},
+                     "fixed_pattern_px": structure.fixed_pattern_px,
+                     "frame_to_frame_correlation": structure.correlation,
+                     "sigma_d_inflation": structure.inflation}
+    if estimate and structure.inflation > 1.5:
+        warnings.append(f"the detection errors repeat from frame to frame (correlation {structure.correlation:.2f}: "
+                        f"a nearly still board); sigma_d is widened x{structure.inflation:.1f} for it")
     if cost > 1.5 and adaptive_knots and history[-1].segments_at_cap > 0:
         warnings.append(f"{history[-1].segments_at_cap} trajectory segments are at the shortest allowed length "
                         f"({min_segment_s * 1e3:.1f} ms) and still fit badly: the motion is faster than the spline can "
@@ -293,4 +359,13 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         segment_cost=np.asarray(summary.segment_cost), segment_count=np.asarray(summary.segment_count),
         observation_time_s=np.asarray(summary.observation_time_s), residual_px=np.asarray(summary.residual_px),
         image_velocity_px_s=np.asarray(summary.image_velocity_px_s),
-        standardised_sq=np.asarray(summary.standardised_sq), frame_poses=used_poses, used_observations=used)
+        standardised_sq=np.asarray(summary.standardised_sq), frame_poses=used_poses, used_observations=used,
+        observation_sigma_px=obs_sigma, noise=noise_summary, solver_line_delay_std_s=solver_std)
+
+
+def _segment_sums(trajectory: BSpline, times: np.ndarray, values: np.ndarray, segments: int) -> np.ndarray:
+    """Sum of `values` per knot segment of the observations at `times` (NaN values skipped)."""
+    breaks = np.asarray(trajectory.breakpoints)
+    ok = np.isfinite(values) & np.isfinite(times)
+    j = np.clip(np.searchsorted(breaks, times[ok], side="right") - 1, 0, segments - 1)
+    return np.bincount(j, weights=values[ok], minlength=segments)

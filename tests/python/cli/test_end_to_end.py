@@ -128,3 +128,46 @@ def test_linedelay_bad_input_exits_2_with_one_line(checkerboard_video, tmp_path,
     assert "Traceback" not in proc.stderr
     lines = [line for line in proc.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "error" in lines[0], proc.stderr
+
+
+@pytest.mark.parametrize("cols, rows, shows", [(4, 3, "9x6"), (10, 7, "9x6"), (6, 9, None)])
+def test_a_target_file_that_does_not_match_the_board_exits_2_saying_what_the_frames_show(
+        checkerboard_video, tmp_path, cols, rows, shows):
+    """Issue 12: a smaller board declared (OpenCV finds 4x3 sub-grids inside the 9x6 board), squares
+    counted instead of inner corners (10x7): exit 2 with one line naming the board the frames show.
+    Swapped cols/rows of a square checkerboard is the same board (a rotated world): it calibrates."""
+    target = tmp_path / "target.yaml"
+    target.write_text(f"target_type: checkerboard\ntargetCols: {cols}\ntargetRows: {rows}\n"
+                      "rowSpacingMeters: 0.04\ncolSpacingMeters: 0.04\n")
+    proc = run_cli("linedelay", checkerboard_video / "video.avi", "--target", target, "--camera",
+                   checkerboard_video / "camera.yaml", "--out", tmp_path / "o", "--no-cache", "--quiet",
+                   "--no-self-check")
+    assert "Traceback" not in proc.stderr
+    if shows is None:
+        assert proc.returncode in (0, 4), proc.stderr
+        return
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and shows in lines[0], proc.stderr
+
+
+def test_static_camera_says_not_determined_without_a_number(tmp_path):
+    """Issue 12: no nonsense headline ("-34148 us +- inf"): exit 3, 'not determined', no estimate."""
+    out = tmp_path / "static"
+    render_video(out, line_delay_s=30e-6, fps=30, size=(640, 480), duration_s=1.5, seed=2, motion=0.0,
+                 supersample=1, progress=False)
+    proc = run_cli("linedelay", out / "video.avi", "--target", out / "target.yaml", "--camera",
+                   out / "camera.yaml", "--out", tmp_path / "res", "--no-cache", "--quiet")
+    assert proc.returncode == 3, proc.stderr
+    assert "not determined" in proc.stdout and "us/row" not in proc.stdout.split("report:")[0], proc.stdout
+    result = json.loads((tmp_path / "res" / "result.json").read_text())
+    assert result["verdict"]["status"] == "undetermined"
+    assert "Traceback" not in proc.stderr
+
+
+def test_linedelay_help_documents_exit_codes_and_flags():
+    proc = run_cli("linedelay", "--help")
+    text = " ".join(proc.stdout.split())
+    for needle in ("exit codes", "4 estimated but not trusted", "3 the video does not determine", "--start",
+                   "--end", "--readout", "--min-segment-ms", "--no-self-check"):
+        assert needle in text, needle

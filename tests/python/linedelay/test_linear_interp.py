@@ -145,7 +145,7 @@ def cli_args(video, out, *extra):
 
 def test_cli_trajectory_linear(video, tmp_path):
     proc = run_cli(*cli_args(video, tmp_path / "lin", "--trajectory", "linear"))
-    assert proc.returncode == 0, proc.stderr
+    assert proc.returncode in (0, 4), proc.stderr   # trusted, or estimated but not trusted
     result = json.loads((tmp_path / "lin" / "result.json").read_text())
     assert result["trajectory_model"] == "linear"
     assert abs(result["line_delay_s"] - 40e-6) < 0.03 * 40e-6

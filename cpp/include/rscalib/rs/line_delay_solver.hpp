@@ -23,7 +23,10 @@ struct RsObservations {
 };
 
 struct RsSolverOptions {
-  double pixel_sigma = 0.3;        // R = sigma^2 I, px
+  double pixel_sigma = 0.3;  // R = sigma^2 I, px
+  // Optional per-observation noise (M values, px): observation m has R = sigma_m^2 I. Empty:
+  // every observation has pixel_sigma (the noise model of docs/formulation.md §8).
+  Eigen::VectorXd observation_sigma;
   bool standardise_errors = true;  // A R A^T (false: plain R)
   double max_rs_gain = 0.8;        // clamp of d * v_dot in A
   bool use_motion_prior = true;
