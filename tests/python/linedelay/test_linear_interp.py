@@ -161,7 +161,8 @@ def test_cli_trajectory_linear(video, tmp_path):
 def test_cli_spline_options_reach_the_engine(video, tmp_path):
     proc = run_cli(*cli_args(video, tmp_path / "uni", "--uniform-knots", "7", "--no-standardise",
                              "--no-motion-prior"))
-    assert proc.returncode == 0, proc.stderr
+    # 7 uniform segments cannot follow this motion: any verdict, but the options must reach the engine
+    assert proc.returncode in (0, 3, 4), proc.stderr
     result = json.loads((tmp_path / "uni" / "result.json").read_text())
     assert result["trajectory_model"] == "spline"
     assert result["segments"] == 7 and len(result["history"]) == 1
