@@ -53,6 +53,7 @@ from scipy.optimize import least_squares, minimize_scalar
 
 from ..errors import InputError
 from .profiles import MIN_ROWS, RowProfiles, read_row_profiles
+from .region import choose_region
 
 __all__ = ["FlickerResult", "estimate_line_delay_flicker"]
 
@@ -64,6 +65,16 @@ MAX_RELATIVE_STD = 0.25
 SAME_PHASE_RESULTANT = 0.95      # |mean exp(2πi f t_i)| above this: phases (almost) all equal
 MOVING_BLOCK = 4                 # frames per block when the scene may move (detrend "frames")
 SPREAD_DISAGREEMENT = 2.0        # fit vs spread uncertainty ratio that earns a warning
+KMAX = 12                        # harmonics of the band waveform (square-ish: duty cycle, clipped edges)
+HARMONIC_NU_MAX = 0.45           # ... all below this many cycles per row
+FUNDAMENTAL_F = 4.0              # nested F below this: a sub-harmonic's extra terms explain nothing
+SUBHARMONIC_SHARE = 0.1          # ... or less than this share of what the fundamental's harmonics explain
+PHASE_TOLERANCE = 0.01           # flicker phases (cycles) closer than this count as one
+PHASE_RMS_MAX = 0.05             # phase drift: frames' own band phases vs the timestamps' prediction (cycles rms)
+RESIDUAL_PEAK_MAX = 0.25         # residual periodogram peak off the fitted harmonics over the bands' peak
+AGREEMENT_SIGMAS = 3.0           # spectrum and phase drift must agree within this many σ
+BLACK_CLAMP = 0.01                # log profiles are clamped here (fraction of the brightest row)
+COARSE_FRAMES = 120              # consecutive frames used for the phase-drift grid
 
 
 # --------------------------------------------------------------------------------------------------
@@ -99,6 +110,7 @@ class _Data:
         else:
             self.frame_basis = (sw / np.linalg.norm(sw))[:, None]
         self.yp = self.project(y)
+        self.yy = np.sum(self.yp ** 2, axis=1)
 
     @property
     def frames(self) -> int:
@@ -139,11 +151,6 @@ class _Data:
         return float(np.sum(self.yp ** 2))
 
 
-def _harmonics(nu_max: float, harmonics: int) -> int:
-    """Harmonics below the row Nyquist frequency (0.5 cycles/row) at the largest ν searched."""
-    return max(1, min(int(harmonics), int(math.floor(0.499 / max(nu_max, 1e-12)))))
-
-
 def _row_design(v: np.ndarray, nu: float, k_count: int, derivative: bool = False) -> np.ndarray:
     """(2K, rows) cos/sin of k·2πνv; with derivative, d/dν of them."""
     out = []
@@ -168,20 +175,24 @@ def _lstsq_rss(columns: np.ndarray, target: np.ndarray) -> tuple[float, np.ndarr
 # ---- spectrum: every frame its own phase -------------------------------------------------------
 
 
+def _frame_design(data: _Data, nu: float, k_count: int) -> np.ndarray:
+    """(rows, 2K) weighted cos/sin of k·2πνv with each frame's own nuisance projected out."""
+    design = _row_design(data.v, nu, k_count).T * data.sw[:, None]
+    return design - data.frame_basis @ (data.frame_basis.T @ design)
+
+
 def _frame_rss(data: _Data, nu: float, k_count: int) -> np.ndarray:
     """Per-frame RSS of the best K harmonics at ν (each frame its own amplitudes and phases)."""
-    design = _row_design(data.v, nu, k_count).T * data.sw[:, None]
-    design -= data.frame_basis @ (data.frame_basis.T @ design)
-    u, s, _ = np.linalg.svd(design, full_matrices=False)
-    u = u[:, s > 1e-9 * s[0]]
-    proj = data.yp @ u
-    return np.sum(data.yp ** 2, axis=1) - np.sum(proj ** 2, axis=1)
+    design = _frame_design(data, nu, k_count)
+    gram = design.T @ design
+    rhs = data.yp @ design                                   # (frames, 2K)
+    coef = rhs @ np.linalg.pinv(gram, rcond=1e-10, hermitian=True)
+    return data.yy - np.sum(rhs * coef, axis=1)
 
 
 def _frame_fit(data: _Data, nu: float, k_count: int) -> np.ndarray:
     """Fitted, projected model per frame (frames, rows), unweighted (for plots)."""
-    design = _row_design(data.v, nu, k_count).T * data.sw[:, None]
-    design -= data.frame_basis @ (data.frame_basis.T @ design)
+    design = _frame_design(data, nu, k_count)
     coef, *_ = np.linalg.lstsq(design, data.yp.T, rcond=None)
     fit = (design @ coef).T
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -204,50 +215,117 @@ def _parabolic_peak(x: np.ndarray, y: np.ndarray, i: int) -> float:
     return float(x[i] + np.clip(shift, -1.0, 1.0) * (x[1] - x[0]))
 
 
-def _spectrum_estimate(data: _Data, nu_hi: float, harmonics: int) -> dict:
-    """ν from the summed periodogram, refined by least squares; per-frame estimates for the spread."""
+def _harmonics_at(nu: float, kmax: int) -> int:
+    """Harmonics of ν below HARMONIC_NU_MAX cycles/row, at most kmax."""
+    return max(1, min(int(kmax), int(math.floor(HARMONIC_NU_MAX / max(abs(nu), 1e-12)))))
+
+
+def _refine_frames(data: _Data, nu0: float, k_count: int, half_width: float, lo: float) -> tuple[float, float]:
+    """(ν, RSS) minimising the per-frame-phase RSS near nu0 (grid, then bounded search)."""
+    span = float(np.ptp(data.v)) + 1.0
+    step = 0.02 / span
+    grid = nu0 + np.arange(-half_width, half_width + 0.5 * step, step)
+    grid = grid[grid >= lo]
+    if len(grid) < 3:
+        return nu0, float(np.sum(_frame_rss(data, nu0, k_count)))
+    total = np.array([float(np.sum(_frame_rss(data, g, k_count))) for g in grid])
+    b = int(np.argmin(total))
+    a, c = grid[max(b - 1, 0)], grid[min(b + 1, len(grid) - 1)]
+    res = minimize_scalar(lambda x: float(np.sum(_frame_rss(data, x, k_count))), bounds=(a, c), method="bounded",
+                          options={"xatol": 1e-7 / span})
+    return (float(res.x), float(res.fun)) if res.fun <= total[b] else (float(grid[b]), float(total[b]))
+
+
+def _fundamental(data: _Data, nu: float, k_count: int, rss: float, dof: int) -> tuple[float, list]:
+    """Climb from a candidate to the fundamental it may be a sub-harmonic of: ν·m replaces ν when
+    the harmonics of ν that are not multiples of m add little: a nested F test below FUNDAMENTAL_F,
+    or less than SUBHARMONIC_SHARE of what the harmonics of ν·m explain (scene structure, which any
+    extra sinusoids partly fit, does not make a sub-harmonic)."""
+    steps = []
+    null = data.null_rss()
+    changed = True
+    while changed:
+        changed = False
+        for m in (2, 3, 5):
+            k_sub = k_count // m
+            if k_sub < 1 or m * nu > HARMONIC_NU_MAX:
+                continue
+            rss_sub = float(np.sum(_frame_rss(data, m * nu, k_sub)))
+            extra = data.frames * 2 * (k_count - k_sub)
+            sigma2 = rss / dof
+            f_stat = ((rss_sub - rss) / extra) / sigma2
+            share = (rss_sub - rss) / max(null - rss_sub, 1e-300)
+            steps.append({"from_nu": nu, "m": m, "f": float(f_stat), "share": float(share)})
+            if f_stat < FUNDAMENTAL_F or share < SUBHARMONIC_SHARE:
+                nu, k_count = m * nu, _harmonics_at(m * nu, k_count)
+                rss = float(np.sum(_frame_rss(data, nu, k_count)))
+                changed = True
+                break
+    return nu, steps
+
+
+def _spectrum_estimate(data: _Data, nu_hi: float, kmax: int, min_cycles: float) -> dict:
+    """ν with each frame its own phase: periodogram peaks and their sub-harmonics as candidates,
+    each refined by least squares with the harmonics of a square-ish wave, the best kept, and then
+    the fundamental chosen over its sub-harmonics (a harmonic of the bands never wins: it misses the
+    fundamental; a sub-harmonic only fits noise with its extra terms)."""
     rows = data.yp.shape[1]
     span = float(np.ptp(data.v)) + 1.0
-    nu_lo = SPECTRUM_MIN_CYCLES / span
+    nu_floor = min_cycles / span
     out: dict = {"method": "spectrum", "ok": False}
-    if nu_hi <= nu_lo:
-        out["reason"] = (f"at most {nu_hi * span:.2f} periods fit in the {rows} rows used; the spectrum needs "
-                         f"{SPECTRUM_MIN_CYCLES:g}")
+    if nu_hi <= nu_floor:
+        out["reason"] = f"at most {nu_hi * span:.2f} periods fit in the {rows} rows used"
         return out
     freqs, power = _periodogram(data)
-    band = (freqs >= nu_lo) & (freqs <= nu_hi)
+    band = (freqs >= nu_floor) & (freqs <= nu_hi)
     if not np.any(band) or not np.any(power[band] > 0):
         out["reason"] = "no band contrast (the frames' row profiles do not vary)"
         return out
     index = np.flatnonzero(band)
-    peak = index[np.argmax(power[band])]
-    # noise floor over all frequencies above the leakage, not just the (maybe narrow) search band
-    floor = float(np.median(power[freqs >= nu_lo]))
-    ratio = float(power[peak] / max(floor, 1e-300))
+    p = power[index]
+    inner = index[1:-1][(p[1:-1] >= p[:-2]) & (p[1:-1] >= p[2:])]
+    if not len(inner):
+        inner = index[[int(np.argmax(p))]]
+    peaks = sorted(inner, key=lambda i: -power[i])[:6]
+    floor = float(np.median(power[freqs >= nu_floor]))
+    ratio = float(power[peaks[0]] / max(floor, 1e-300))
     log_power = np.log(np.maximum(power, 1e-300))
-    nu0 = _parabolic_peak(freqs, log_power, peak)
-    k_count = _harmonics(nu_hi, harmonics)
-
-    def total(nu: float) -> float:
-        return float(np.sum(_frame_rss(data, nu, k_count)))
-
-    width = 0.6 / span
-    lo, hi = max(nu_lo * 0.5, nu0 - width), nu0 + width
-    grid = np.linspace(lo, hi, 61)
-    per_frame = np.array([_frame_rss(data, nu, k_count) for nu in grid])  # (grid, frames)
-    best = int(np.argmin(per_frame.sum(axis=1)))
-    step = grid[1] - grid[0]
-    res = minimize_scalar(total, bounds=(grid[max(best - 1, 0)], grid[min(best + 1, len(grid) - 1)]),
-                          method="bounded", options={"xatol": 1e-6 / span})
-    nu = float(res.x)
-    rss = total(nu)
+    seeds = []
+    for j, i in enumerate(peaks):
+        nu_p = _parabolic_peak(freqs, log_power, i)
+        seeds.append(nu_p)
+        if j < 3:
+            seeds += [nu_p / m for m in range(2, 7) if nu_p / m >= nu_floor]
     n_eff = data.frames * data.rows_used
+    candidates: list = []  # (ν, RSS, harmonics)
+    for seed in sorted(seeds):
+        if any(abs(seed - c[0]) < 0.1 / span for c in candidates):
+            continue
+        k_c = _harmonics_at(seed, kmax)
+        nu_c, rss_c = _refine_frames(data, seed, k_c, 0.5 / span, nu_floor * 0.5)
+        candidates.append((nu_c, rss_c, k_c))
+    sigma2_ref = min(c[1] / max(1, n_eff - data.nuisance_dof() - data.frames * 2 * c[2] - 1) for c in candidates)
+    # BIC: the fit against the amplitudes it spends
+    nu, rss, k_common = min(candidates, key=lambda c: c[1] / sigma2_ref
+                            + math.log(max(n_eff, 2)) * data.frames * 2 * c[2])
+    dof = max(1, n_eff - data.nuisance_dof() - data.frames * 2 * k_common - 1)
+    # the best candidate may be a sub-harmonic (its extra terms fit noise): climb to the fundamental
+    nu_f, steps = _fundamental(data, nu, k_common, rss, dof)
+    k_count = _harmonics_at(nu_f, kmax)
+    nu, rss = _refine_frames(data, nu_f, k_count, 0.1 / span, nu_floor * 0.5)
     dof = max(1, n_eff - data.nuisance_dof() - data.frames * 2 * k_count - 1)
     sigma2 = rss / dof
-    h = 0.01 / span
+
+    def total(x: float) -> float:
+        return float(np.sum(_frame_rss(data, x, k_count)))
+
+    h = 0.01 / (span * k_count)
     curvature = (total(nu + h) - 2.0 * rss + total(nu - h)) / h ** 2
     std_fit = math.sqrt(2.0 * sigma2 / curvature) if curvature > 0 else float("inf")
-    # per-frame minimisers on the same grid, refined by a parabola through the three nearest points
+    # per-frame minimisers near ν, refined by a parabola through the three nearest grid points
+    step = 0.01 / span
+    grid = nu + np.arange(-30, 31) * step
+    per_frame = np.array([_frame_rss(data, g, k_count) for g in grid])  # (grid, frames)
     per_frame_nu = np.full(data.frames, np.nan)
     for j, column in enumerate(per_frame.T):
         i = int(np.argmin(column))
@@ -260,32 +338,36 @@ def _spectrum_estimate(data: _Data, nu_hi: float, harmonics: int) -> dict:
     if len(finite) >= 3:
         mad = np.median(np.abs(finite - np.median(finite)))
         std_spread = float(1.4826 * mad / math.sqrt(len(finite))) if mad > 0 else float("nan")
+    elif len(finite) == 2:
+        std_spread = float(abs(finite[1] - finite[0]) / 2.0)
     delta_chi2 = (data.null_rss() - rss) / sigma2
-    # Is the peak a harmonic of bands with a longer period (fewer than 2 per frame, below the band
-    # searched)? Then ν/m with m times the harmonics explains much more (a true fundamental
-    # carries more energy than its harmonic; fitting scene residue with the extra terms does not).
+    penalty = math.log(max(n_eff, 2)) * data.frames * 2 * k_count
+    # Are these bands a harmonic of bands with fewer periods than the spectrum searches? Then ν/m
+    # with m times the harmonics explains much more (a true fundamental carries more than scene
+    # residue fitted by the extra terms).
     for m in (2, 3):
-        k_sub = _harmonics(nu / m, harmonics * m)
-        if not 0.3 <= nu / m * span < SPECTRUM_MIN_CYCLES or k_sub <= k_count:
+        if not 0.3 <= nu / m * span < min_cycles:
+            continue
+        k_sub = min(m * k_count, _harmonics_at(nu / m, m * kmax))
+        if k_sub <= k_count:
             continue
         sub = minimize_scalar(lambda x, k_sub=k_sub: float(np.sum(_frame_rss(data, x, k_sub))),
                               bounds=(nu / m - 0.3 / span, nu / m + 0.3 / span), method="bounded")
         gain = (rss - sub.fun) / sigma2
         if gain > max(MIN_DELTA_CHI2 + 4 * data.frames * 2 * (k_sub - k_count), 0.5 * delta_chi2):
             out.update(nu=nu, harmonics=k_count, delta_chi2=float(delta_chi2), reason=(
-                f"the peak at {nu * span:.2f} periods per frame is a harmonic of bands with {sub.x * span:.2f} "
-                "periods per frame, too few for the spectrum"))
+                f"the bands at {nu * span:.2f} periods per frame look like a harmonic of bands with "
+                f"{sub.x * span:.2f} periods per frame, too few for the spectrum"))
             return out
     out.update(ok=True, nu=nu, std_fit_nu=std_fit, std_spread_nu=std_spread, per_frame_nu=per_frame_nu,
                spread_label="frame", delta_chi2=float(delta_chi2), peak_ratio=ratio, harmonics=k_count,
-               rss=rss, sigma2=sigma2)
-    if nu < nu_lo:
-        out.update(ok=False, reason=f"{nu * span:.2f} periods per frame: too few for the spectrum")
-    elif ratio < MIN_PEAK_RATIO or delta_chi2 < MIN_DELTA_CHI2 + 4 * data.frames * 2 * k_count:
+               rss=rss, sigma2=sigma2, candidates_nu=[c[0] for c in candidates], fundamental_tests=steps)
+    if nu * span < min_cycles:
+        out.update(ok=False, reason=f"{nu * span:.2f} periods per frame: too few for the spectrum "
+                                    f"(needs {min_cycles:g})")
+    elif ratio < MIN_PEAK_RATIO or delta_chi2 < MIN_DELTA_CHI2 + penalty:
         out.update(ok=False, reason=f"no flicker bands found (spectral peak {ratio:.1f}x the median, "
-                                    f"delta chi2 {delta_chi2:.0f})")
-    elif best in (0, len(grid) - 1):
-        out.update(ok=False, reason="the spectral peak did not refine (minimum at the edge of its window)")
+                                    f"delta chi2 {delta_chi2:.0f} for {data.frames * 2 * k_count} amplitudes)")
     return out
 
 
@@ -342,31 +424,74 @@ def _local_minima(values: np.ndarray) -> np.ndarray:
     return np.unique(np.concatenate([inner, np.array(ends, dtype=int)]))
 
 
-def _phase_drift_estimate(data: _Data, nu_lo: float, nu_hi: float, harmonics: int,
-                          max_grid_frames: int = 40) -> dict:
+def distinct_phases(phase0: np.ndarray, tolerance: float = PHASE_TOLERANCE) -> int:
+    """How many different flicker phases (cycles, mod 1) the frames have."""
+    x = np.sort(np.mod(phase0, 1.0))
+    if len(x) == 0:
+        return 0
+    gaps = np.diff(np.concatenate([x, [x[0] + 1.0]]))
+    return max(1, int(np.sum(gaps > tolerance)))
+
+
+def _phase_drift_estimate(data: _Data, nu_lo: float, nu_hi: float, kmax: int, sign: int = 0) -> dict:
+    """One phase for all frames through their timestamps, ν of either sign (sign > 0 / < 0 restricts).
+
+    Every local minimum of a fundamental-only profile over the whole range is a candidate: with few
+    distinct flicker phases Q among the frames, harmonic k' of another ν' reproduces harmonic k of
+    the true one when k' ≡ ±k (mod Q) and k'ν' = ±kν (the whole-cycle alternatives of the drift
+    between frames). Each candidate is refined with all harmonics on all frames, and the best must
+    beat the second by AMBIGUITY_DELTA_CHI2, else the result is aliased."""
     out: dict = {"method": "phase-drift", "ok": False}
     span = float(np.ptp(data.v)) + 1.0
-    k_count = _harmonics(nu_hi, harmonics)
-    # Coarse profile over ν on a subsample of frames: the minimum is ~1/rows wide whatever the
-    # number of frames, so a step of 0.08/rows cannot step over it.
-    pick = np.unique(np.linspace(0, data.frames - 1, min(data.frames, max_grid_frames)).round().astype(int))
-    coarse = data.subset(pick) if len(pick) < data.frames else data
-    grid = np.arange(nu_lo, nu_hi + 0.04 / span, 0.08 / span)
-    rss = np.array([_pd_profile_rss(coarse, nu, k_count)[0] for nu in grid])
-    best = int(np.argmin(rss))
-    dof_coarse = max(1, coarse.frames * coarse.rows_used - coarse.nuisance_dof() - 2 * k_count - 1)
-    sigma2_coarse = rss[best] / dof_coarse
-    minima = _local_minima(rss)
-    others = [i for i in minima if abs(grid[i] - grid[best]) > 0.5 / span]
-    out["grid_nu"], out["grid_rss"] = grid, rss
-    second = min((rss[i] for i in others), default=np.inf)
-    out["ambiguity_delta_chi2"] = float((second - rss[best]) / sigma2_coarse) if np.isfinite(second) else None
-    nu0 = float(grid[best])
-    _, coef0 = _pd_profile_rss(data, nu0, k_count)
-    fit = _pd_refine(data, nu0, coef0, k_count)
+    q = distinct_phases(data.phase0)
+    out["distinct_phases"] = q
+    if q < 2:
+        out["reason"] = ("every frame has the same flicker phase: no drift between frames (frame rate and "
+                         "flicker commensurate)")
+        return out
+    k_count = _harmonics_at(nu_hi, kmax)
+    step = 0.08 / span
+    positive = np.arange(nu_lo, nu_hi + 0.5 * step, step)
+    grid = np.concatenate([-positive[::-1] if sign <= 0 else [], positive if sign >= 0 else []])
+    coarse = data.subset(np.arange(min(data.frames, COARSE_FRAMES))) if data.frames > COARSE_FRAMES else data
+    rss1 = np.array([_pd_profile_rss(coarse, nu, 1)[0] for nu in grid])
+    out["grid_nu"], out["grid_rss"] = grid, rss1
+    minima = sorted(_local_minima(rss1), key=lambda i: rss1[i])[:6]
+    candidates = []  # (ν, profile RSS with all harmonics)
+
+    def profile(x: float, d: _Data = data) -> float:
+        return _pd_profile_rss(d, x, k_count)[0]
+
+    for i in minima:
+        lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+        res = minimize_scalar(profile, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3 / span})
+        if all(abs(res.x - c[0]) > 0.3 / span for c in candidates):
+            candidates.append((float(res.x), float(res.fun)))
+    candidates.sort(key=lambda c: c[1])
+    _, coef0 = _pd_profile_rss(data, candidates[0][0], k_count)
+    fit = _pd_refine(data, candidates[0][0], coef0, k_count)
+    out["candidates_nu"] = [c[0] for c in candidates]
+    second = candidates[1][1] if len(candidates) > 1 else np.inf
+    out["ambiguity_delta_chi2"] = float((second - fit["rss"]) / fit["sigma2"]) if np.isfinite(second) else None
     delta_chi2 = (data.null_rss() - fit["rss"]) / fit["sigma2"]
     out.update(ok=True, nu=fit["nu"], std_fit_nu=fit["std_fit_nu"], coef=fit["coef"], harmonics=k_count,
                delta_chi2=float(delta_chi2), rss=fit["rss"], sigma2=fit["sigma2"], converged=fit["converged"])
+    # the drift model against free per-frame phases at the same ν: timestamps and frequency must fit
+    rss_free = float(np.sum(_frame_rss(data, fit["nu"], k_count)))
+    extra = 2 * k_count * (data.frames - 1)
+    dof_free = max(1, data.frames * data.rows_used - data.nuisance_dof() - 2 * k_count * data.frames)
+    joint_f = ((fit["rss"] - rss_free) / extra) / (rss_free / dof_free) if extra > 0 and rss_free > 0 else 0.0
+    out["joint_vs_free_f"] = float(joint_f)
+    # each frame's own band phase (fundamental, free) against the phase the timestamps predict
+    design = _frame_design(data, fit["nu"], 1)
+    free, *_ = np.linalg.lstsq(design, data.yp.T, rcond=None)          # (2, frames)
+    measured = free[0] - 1j * free[1]
+    predicted = (fit["coef"][0] - 1j * fit["coef"][1]) * np.exp(2j * np.pi * data.phase0)
+    weight = np.abs(measured)
+    offsets = np.angle(measured / np.where(predicted == 0, 1.0, predicted)) / (2 * np.pi)
+    phase_rms = float(np.sqrt(np.sum(weight * offsets ** 2) / max(weight.sum(), 1e-300)))
+    out["phase_offsets_cycles"] = offsets
+    out["phase_rms_cycles"] = phase_rms
     # spread over contiguous blocks of frames (contiguous: interleaving can give every block the
     # same flicker phase when the rates are commensurate)
     groups = min(6, data.frames // 3)
@@ -374,8 +499,11 @@ def _phase_drift_estimate(data: _Data, nu_lo: float, nu_hi: float, harmonics: in
     if groups >= 3:
         for block in np.array_split(np.arange(data.frames), groups):
             sub = data.subset(block)
-            _, c0 = _pd_profile_rss(sub, fit["nu"], k_count)
-            subset_nu.append(_pd_refine(sub, fit["nu"], c0, k_count)["nu"])
+            if distinct_phases(sub.phase0) < 2:
+                continue
+            res = minimize_scalar(profile, bounds=(fit["nu"] - 0.2 / span, fit["nu"] + 0.2 / span), args=(sub,),
+                                  method="bounded", options={"xatol": 1e-5 / span})
+            subset_nu.append(float(res.x))
     subset_nu = np.array(subset_nu)
     out["per_frame_nu"] = subset_nu
     out["spread_label"] = "frame block"
@@ -384,17 +512,17 @@ def _phase_drift_estimate(data: _Data, nu_lo: float, nu_hi: float, harmonics: in
     if delta_chi2 < MIN_DELTA_CHI2 + 4 * 2 * k_count:
         out.update(ok=False, reason=f"no flicker found (the fit lowers chi2 by only {delta_chi2:.0f})")
     elif out["ambiguity_delta_chi2"] is not None and out["ambiguity_delta_chi2"] < AMBIGUITY_DELTA_CHI2:
-        alias = grid[min(others, key=lambda i: rss[i])]
-        out.update(ok=False, reason=f"aliased: line delays {grid[best]:.6g} and {alias:.6g} cycles/row fit about "
-                                    f"equally well (delta chi2 {out['ambiguity_delta_chi2']:.1f}); frame times "
-                                    "and flicker may be (nearly) commensurate")
-    elif data.detrend == "smooth" and fit["nu"] * span < SPECTRUM_MIN_CYCLES:
-        # with the same flicker phase in every frame only the within-frame pattern is left, and
-        # under ~2 periods it is indistinguishable from the scene's own shading
-        out.update(ok=False, reason=f"{fit['nu'] * span:.2f} periods per frame and no phase drift between frames: "
-                                    "bands cannot be told from scene structure")
-    elif best in (0, len(grid) - 1) and abs(fit["nu"] - grid[best]) < 0.1 / span:
-        out.update(ok=False, reason="the best line delay is at the edge of the searched range")
+        alias = candidates[1][0]
+        out.update(ok=False, alias_nu=alias, reason=f"aliased: {fit['nu']:.6g} and {alias:.6g} cycles/row fit about "
+                                                    f"equally well (delta chi2 {out['ambiguity_delta_chi2']:.1f})")
+    elif phase_rms > PHASE_RMS_MAX:
+        out.update(ok=False, reason="the band phases do not drift as the timestamps and the frequency predict "
+                                    f"(each frame's own band phase is off by {phase_rms:.3f} cycles rms; joint fit "
+                                    f"{joint_f:.1f}x worse per amplitude than free phases): inexact timestamps or "
+                                    "frequency, or a moving scene")
+    elif data.detrend == "smooth" and abs(fit["nu"]) * span < SPECTRUM_MIN_CYCLES:
+        out.update(ok=False, reason=f"{abs(fit['nu']) * span:.2f} periods per frame and no phase drift between "
+                                    "frames: bands cannot be told from scene structure")
     return out
 
 
@@ -416,15 +544,57 @@ def _pd_fit_curves(data: _Data, nu: float, coef: np.ndarray, k_count: int) -> np
 # Result and entry point
 
 
+def _residual_tests(data: _Data, model_yp: np.ndarray, nu: float) -> tuple[float, float, float]:
+    """(peak ratio, its ν, noise inflation) from the residual periodogram (summed over frames).
+
+    Peak ratio: the largest residual peak away from the fitted harmonics of ν, over the fitted
+    model's largest peak: bands the fit does not explain (another period, a harmonic lock).
+    Inflation: the residual power next to the fitted harmonics (weighted by the model's power
+    there) over the residual's mean power: scene structure or compression noise near the band
+    frequencies makes the white-noise σ of the fit too small by its square root (floored at 1); so
+    does a residual common to all frames (the same scene structure), which does not average out."""
+    span = float(np.ptp(data.v)) + 1.0
+    rows = data.yp.shape[1]
+    nfft = 1 << int(math.ceil(math.log2(16 * rows)))
+    window = np.hanning(rows)
+    spectra = np.fft.rfft((data.yp - model_yp) * window, n=nfft, axis=1)
+    res = np.sum(np.abs(spectra) ** 2, axis=0)
+    coherent = np.abs(np.sum(spectra, axis=0)) ** 2   # residual common to the frames (the same scene)
+    mod = np.sum(np.abs(np.fft.rfft(model_yp * window, n=nfft, axis=1)) ** 2, axis=0)
+    freqs = np.arange(len(res)) / nfft
+    band = (freqs >= 2.0 / span) & (freqs <= HARMONIC_NU_MAX)
+    if not np.any(band) or not mod[band].max() > 0:
+        return 0.0, float("nan"), 1.0
+    nearest = np.round(freqs / abs(nu))
+    offset = np.abs(freqs - nearest * abs(nu))
+    harmonic = (offset <= 1.5 / span) & (nearest >= 1)
+    off = band & ~harmonic
+    ratio, peak_nu = 0.0, float("nan")
+    if np.any(off):
+        i = np.flatnonzero(off)[int(np.argmax(res[off]))]
+        ratio, peak_nu = float(res[i] / mod[band].max()), float(freqs[i])
+    ring = (offset > 1.0 / span) & (offset <= 3.0 / span) & (nearest >= 1) & (freqs <= 0.5)
+    weight = np.zeros_like(freqs)
+    for k in np.unique(nearest[ring]).astype(int):
+        near = np.abs(freqs - k * abs(nu)) <= 0.5 / span
+        weight[ring & (nearest == k)] = float(mod[near].max()) * k * k if np.any(near) else 0.0
+    level = float(np.mean(res[(freqs > 0) & (freqs <= 0.5)]))
+    inflation = 1.0
+    if weight.sum() > 0 and level > 0:
+        near = max(float(np.sum(weight * res)), float(np.sum(weight * coherent))) / weight.sum()
+        inflation = max(1.0, near / level)
+    return ratio, peak_nu, inflation
+
+
 @dataclass
 class FlickerResult:
     """Line delay from flicker bands. Times in seconds, ν in cycles per row."""
 
-    line_delay_s: float
+    line_delay_s: float              # signed: negative = bottom-to-top readout (docs/conventions.md)
     line_delay_std_s: float          # max(fit, spread) when both exist
     line_delay_std_fit_s: float      # Jacobian / profile curvature, scaled by the residual variance
     line_delay_std_spread_s: float   # spread over frames (spectrum) or blocks of frames (phase drift)
-    readout_time_s: float            # d · rows
+    readout_time_s: float            # |d| · rows
     rows: int
     frequency_hz: float
     period_rows: float
@@ -443,6 +613,15 @@ class FlickerResult:
     timestamps_source: str = "none"
     image_size: tuple = (0, 0)
     roi: Optional[tuple] = None
+    readout_direction: str = "top-to-bottom"
+    direction_determined: bool = False   # by the phase drift (timestamps); else assumed or given
+    vertical_blanking_rows: float = float("nan")
+    vertical_blanking_std_rows: float = float("nan")
+    vertical_blanking_s: float = float("nan")
+    blanking_determined: bool = False
+    reason: Optional[str] = None         # why not determined
+    checks: dict = field(default_factory=dict)
+    region: dict = field(default_factory=dict)
     plot: dict = field(default_factory=dict, repr=False)
 
     def summary_dict(self) -> dict:
@@ -453,32 +632,42 @@ class FlickerResult:
                 return [clean(v) for v in x]
             if isinstance(x, (float, np.floating)):
                 return float(x) if math.isfinite(x) else None
-            if isinstance(x, np.integer):
-                return int(x)
+            if isinstance(x, (np.integer, np.bool_)):
+                return x.item()
             return x
         keys = ["line_delay_s", "line_delay_std_s", "line_delay_std_fit_s", "line_delay_std_spread_s",
                 "readout_time_s", "rows", "frequency_hz", "period_rows", "cycles_per_frame", "method", "detrend",
-                "frames_used", "frames_total", "modulation_depth", "delta_chi2", "determined", "warnings",
-                "estimates", "spread_label", "timestamps_source", "image_size", "roi"]
+                "frames_used", "frames_total", "modulation_depth", "delta_chi2", "determined", "reason", "warnings",
+                "readout_direction", "direction_determined", "vertical_blanking_rows", "vertical_blanking_std_rows",
+                "vertical_blanking_s", "blanking_determined", "checks", "estimates", "region", "spread_label",
+                "timestamps_source", "image_size", "roi"]
         out = {k: clean(getattr(self, k)) for k in keys}
         out["spread_line_delays_s"] = clean(self.spread_line_delays_s)
         return out
 
 
+READOUTS = ("auto", "top-to-bottom", "bottom-to-top")
+
+
 def estimate_line_delay_flicker(frames: Any, frequency_hz: float, timestamps_s: Optional[Sequence[float]] = None, *,
                                 rows: Optional[int] = None, roi=None, max_frames: Optional[int] = None,
-                                method: str = "auto", detrend: str = "auto", harmonics: int = 4,
+                                method: str = "auto", detrend: str = "auto", harmonics: int = KMAX,
                                 poly_degree: int = 3, max_line_delay_s: Optional[float] = None,
+                                readout: str = "auto", region: str = "auto",
                                 progress: bool = False) -> FlickerResult:
     """Line delay d (s/row) from the bands of a light flickering at ``frequency_hz``.
 
     frames: arrays, a FrameSource, a video or an image folder (see :func:`read_row_profiles`), or a
         :class:`RowProfiles`. timestamps_s: row-0 times (required for ``phase-drift``; videos carry
         their own). frequency_hz: of the light's intensity (twice the mains frequency for mains lamps).
-    rows: sensor rows read out, for readout_time_s (default: image height). roi: (x, y, w, h) region
-        whose columns are averaged. method: "auto" (phase drift when timestamps are known and it is
-        determined, else spectrum), "spectrum" or "phase-drift". detrend: "auto", "frames", "smooth".
-    max_line_delay_s: upper end of the search (default: frame interval / rows when times are known).
+    rows: sensor rows read out, for readout_time_s and the blanking (default: image height). roi:
+        (x, y, w, h) region whose columns are averaged (overrides the automatic region). method:
+        "auto" (phase drift when timestamps are known, cross-checked by the spectrum), "spectrum" or
+        "phase-drift". detrend: "auto", "frames", "smooth". harmonics: of the band waveform (at most).
+    readout: "auto" (the phase drift tells the direction; without timestamps top-to-bottom is
+        assumed and said), "top-to-bottom" or "bottom-to-top" (d < 0). region: "auto" (strips and
+        rows with bands, overlays masked) or "all".
+    max_line_delay_s: upper end of |d| searched (default: frame interval / rows when times are known).
     """
     started = time.perf_counter()
     if not (isinstance(frequency_hz, (int, float, np.floating)) and math.isfinite(frequency_hz) and frequency_hz > 0):
@@ -487,10 +676,18 @@ def estimate_line_delay_flicker(frames: Any, frequency_hz: float, timestamps_s: 
         raise InputError(f"unknown method {method!r} (auto, spectrum, phase-drift)")
     if detrend not in ("auto", "frames", "smooth"):
         raise InputError(f"unknown detrend {detrend!r} (auto, frames, smooth)")
+    if readout not in READOUTS:
+        raise InputError(f"unknown readout direction {readout!r} ({', '.join(READOUTS)})")
+    if region not in ("auto", "all"):
+        raise InputError(f"unknown region choice {region!r} (auto, all)")
     if int(harmonics) < 1:
         raise InputError("harmonics must be >= 1")
+    kmax = int(harmonics)
     profiles = frames if isinstance(frames, RowProfiles) else read_row_profiles(
         frames, timestamps_s, roi=roi, max_frames=max_frames, progress=progress)
+    region_info = dict(profiles.region)
+    if profiles.strips is not None and not region_info:
+        region_info = choose_region(profiles, auto=(region == "auto" and profiles.roi is None))
     height = profiles.image_size[1]
     rows = int(rows) if rows is not None else height
     if rows < 1:
@@ -501,29 +698,35 @@ def estimate_line_delay_flicker(frames: Any, frequency_hz: float, timestamps_s: 
     times = profiles.times_s
     if method == "phase-drift" and times is None:
         raise InputError("the phase-drift method needs frame timestamps")
+    sign = {"auto": 0, "top-to-bottom": 1, "bottom-to-top": -1}[readout]
 
-    # Search range of ν = f d: a frame's readout fits in its frame interval; rows alias above 0.5.
+    # Search range of |ν| = f |d|: a frame's readout fits in its frame interval; rows alias above 0.5.
     nu_hi = 0.49
+    frame_interval = float(np.median(np.diff(times))) if times is not None and n > 1 else None
     if max_line_delay_s is not None:
         nu_hi = min(nu_hi, f * float(max_line_delay_s))
-    elif times is not None and n > 1:
-        nu_hi = min(nu_hi, 1.05 * f * float(np.median(np.diff(times))) / max(rows, height))
+    elif frame_interval is not None:
+        nu_hi = min(nu_hi, 1.05 * f * frame_interval / max(rows, height))
 
-    # Weights and log profiles.
+    # Weights and log profiles: var(log p) ~ σ² / p². Black (clipped) bands are clamped at
+    # BLACK_CLAMP of the brightest row: a clamp, not an offset, so the model stays exact above it.
     p = profiles.values
     lit = np.all(np.isfinite(p), axis=0)
     if not np.any(lit):
-        raise InputError("every row of the region is clipped (saturated or black) in some frame")
+        raise InputError("no row of the region has a usable column strip")
     median = np.where(lit, np.median(np.where(lit, p, 0.0), axis=0), 0.0)
     top = float(np.max(median))
     if not top > 0:
         raise InputError("the frames are black in the region used")
     usable = lit & (median > 0.01 * top)
     if np.count_nonzero(usable) < MIN_ROWS:
-        raise InputError(f"only {np.count_nonzero(usable)} rows are neither dark nor clipped; need {MIN_ROWS}")
-    w = np.where(usable, (median / top) ** 2, 0.0)
+        raise InputError(f"only {np.count_nonzero(usable)} rows are lit; need {MIN_ROWS}")
+    floor = BLACK_CLAMP * top
+    w = np.where(usable, (np.maximum(median, floor) / top) ** 2, 0.0)
+    if profiles.row_pixels is not None:  # a row averaged over fewer columns is noisier
+        w = w * profiles.row_pixels / max(float(np.max(profiles.row_pixels)), 1e-300)
     sw = np.sqrt(w / w[usable].mean())
-    y = np.log(np.maximum(np.where(lit, p, top), 1e-3 * top))
+    y = np.log(np.maximum(np.where(lit, p, top), floor))
     v = profiles.rows_v - 0.5 * (profiles.rows_v[0] + profiles.rows_v[-1])
     phase0 = None if times is None else np.mod(f * times, 1.0)
     span_rows = float(np.ptp(v)) + 1.0
@@ -549,22 +752,21 @@ def estimate_line_delay_flicker(frames: Any, frequency_hz: float, timestamps_s: 
     best = None  # (std, data, estimates, chosen)
     last = None
     for mode, block in attempts:
-        if mode == "smooth" and best is not None:
-            break
         data = _Data(y, sw, v, phase0, mode, poly_degree, block)
-        spec = _spectrum_estimate(data, nu_hi, harmonics) if method in ("auto", "spectrum") else None
+        min_cycles = 1.0 if mode == "frames" and block is None else SPECTRUM_MIN_CYCLES
+        spec = _spectrum_estimate(data, nu_hi, kmax, min_cycles) if method in ("auto", "spectrum") else None
         drift = None
         if method in ("auto", "phase-drift") and phase0 is not None and nu_hi > 0.1 / span_rows:
-            # the whole range, not just around the spectrum's peak: that may be a harmonic
-            drift = _phase_drift_estimate(data, 0.1 / span_rows, nu_hi, harmonics)
+            drift = _phase_drift_estimate(data, 0.1 / span_rows, nu_hi, kmax, sign)
         found = {e["method"]: dict(e, detrend=data.label) for e in (drift, spec) if e is not None}
         good = [e for e in found.values() if e["ok"]]
         last = (float("inf"), data, found, None)
         if good:
-            chosen = good[0]  # phase drift first: it uses the most information
-            std = _std_of(chosen, f)[0]
-            if best is None or std < best[0]:
-                best = (std, data, found, chosen)
+            # the first detrend that works (a static scene cancels best over all frames; blocks of
+            # frames only when that fails, e.g. a moving camera); phase drift first: it uses the
+            # most information
+            best = (_std_of(good[0], f)[0], data, found, good[0])
+            break
     best = best or last
     assert best is not None
     _, data, estimates, chosen = best
@@ -579,19 +781,25 @@ def estimate_line_delay_flicker(frames: Any, frequency_hz: float, timestamps_s: 
                          line_delay_std_spread_s=spread, delta_chi2=e.get("delta_chi2"))
         if "reason" in e:
             entry["reason"] = e["reason"]
-        if name == "phase-drift" and e.get("ambiguity_delta_chi2") is not None:
-            entry["ambiguity_delta_chi2"] = e["ambiguity_delta_chi2"]
-        if name == "spectrum" and "peak_ratio" in e:
-            entry["peak_ratio"] = e["peak_ratio"]
+        if "alias_nu" in e:
+            entry["alias_line_delay_s"] = e["alias_nu"] / f
+        for key in ("ambiguity_delta_chi2", "distinct_phases", "joint_vs_free_f", "phase_rms_cycles", "peak_ratio"):
+            if e.get(key) is not None:
+                entry[key] = e[key]
+        for key in ("candidates_nu",):
+            if key in e:
+                entry["candidate_line_delays_s"] = [c / f for c in e[key]]
         summary_estimates[name] = entry
 
     span = float(np.ptp(v)) + 1.0
     determined = chosen is not None
+    reasons: list = []
+    checks: dict = {}
     if chosen is None:
         # report the best guess of the method that got furthest, marked undetermined
         chosen = next((e for e in estimates.values() if "nu" in e), None)
-        reasons = "; ".join(f"{k}: {e['reason']}" for k, e in estimates.items() if "reason" in e)
-        warnings.append("the data do not determine the line delay: " + (reasons or "no usable estimate"))
+        reasons.append("; ".join(f"{k}: {e['reason']}" for k, e in estimates.items() if "reason" in e)
+                       or "no usable estimate")
     if chosen is None:
         nu = std_total = std_fit = std_spread = float("nan")
         spread_nu, label, depth, delta_chi2 = np.zeros(0), "frame", float("nan"), float("nan")
@@ -606,29 +814,91 @@ def estimate_line_delay_flicker(frames: Any, frequency_hz: float, timestamps_s: 
             if ratio > SPREAD_DISAGREEMENT or ratio < 1.0 / SPREAD_DISAGREEMENT:
                 warnings.append(f"uncertainty from the fit ({std_fit * 1e9:.3g} ns) and from the spread over "
                                 f"{label}s ({std_spread * 1e9:.3g} ns) disagree; reporting the larger")
-        line_delay = nu / f
-        if determined and not std_total <= MAX_RELATIVE_STD * abs(line_delay):
+        if determined and not std_total <= MAX_RELATIVE_STD * abs(nu / f):
             determined = False
-            warnings.append(f"the data do not determine the line delay: std {std_total * 1e6:.3g} us/row is more "
-                            f"than {MAX_RELATIVE_STD:.0%} of the estimate")
-    if determined and len(estimates) == 2 and all(e["ok"] for e in estimates.values()):
-        a, b = estimates["spectrum"], estimates["phase-drift"]
-        sa, sb = _std_of(a, f)[0], _std_of(b, f)[0]
-        if abs(a["nu"] - b["nu"]) / f > 3.0 * math.hypot(sa, sb):
-            warnings.append(f"spectrum ({a['nu'] / f * 1e6:.5g} us/row) and phase-drift ({b['nu'] / f * 1e6:.5g} "
-                            "us/row) estimates disagree: the spectrum may have locked onto a harmonic (few periods per "
-                            "frame), or the frame timestamps are inexact")
+            reasons.append(f"std {std_total * 1e6:.3g} us/row is more than {MAX_RELATIVE_STD:.0%} of the estimate")
+
+    # Residual test: the fitted waveform must explain the periodic structure of the profiles.
+    model_yp = None
+    if chosen is not None and "nu" in chosen:
+        if chosen["method"] == "phase-drift":
+            model_yp = data.project(np.tensordot(chosen["coef"], _pd_model(data, chosen["nu"], chosen["harmonics"]),
+                                                 axes=1))
+        else:
+            model_yp = _frame_fit(data, chosen["nu"], chosen["harmonics"]) * data.sw
+            model_yp = np.nan_to_num(model_yp)
+        explained = 1.0 - float(np.sum((data.yp - model_yp) ** 2)) / max(data.null_rss(), 1e-300)
+        checks["explained_fraction"] = explained
+        peak_ratio, peak_nu, inflation = _residual_tests(data, model_yp, nu)
+        checks["residual_noise_inflation"] = inflation
+        if inflation > 1.0 and math.isfinite(std_fit):
+            std_fit *= math.sqrt(inflation)
+            std_total = max(std_total, std_fit)
+            if determined and not std_total <= MAX_RELATIVE_STD * abs(nu / f):
+                determined = False
+                reasons.append(f"std {std_total * 1e6:.3g} us/row is more than {MAX_RELATIVE_STD:.0%} of the "
+                               "estimate")
+        if abs(nu) * span >= SPECTRUM_MIN_CYCLES:
+            checks["residual_peak_ratio"] = peak_ratio
+            if determined and peak_ratio > RESIDUAL_PEAK_MAX:
+                determined = False
+                reasons.append(f"the fitted bands do not explain the profiles: periodic structure of period "
+                               f"{1.0 / peak_nu:.1f} rows is left ({peak_ratio:.0%} of the bands' peak power)")
+
+    # Cross-check: every method that produced an estimate must agree with the one reported.
+    if determined and chosen is not None:
+        for name, e in estimates.items():
+            if e is chosen or not e["ok"]:
+                continue
+            s_a, s_b = std_total, _std_of(e, f)[0]
+            gap = abs(abs(chosen["nu"]) - abs(e["nu"])) / f
+            sigmas = gap / math.hypot(s_a, s_b) if math.hypot(s_a, s_b) > 0 else float("inf")
+            checks[f"agreement_{chosen['method']}_vs_{name}_sigmas"] = sigmas
+            if not sigmas <= AGREEMENT_SIGMAS:
+                determined = False
+                reasons.append(f"the methods disagree: {chosen['method']} {abs(chosen['nu']) / f * 1e6:.6g} and "
+                               f"{name} {abs(e['nu']) / f * 1e6:.6g} us/row ({sigmas:.1f} sigma apart): a harmonic, "
+                               "inexact timestamps or frequency, or not flicker")
+
+    # Readout direction: the spectrum sees |d|; the phase drift sees its sign.
+    direction_determined = chosen is not None and chosen.get("method") == "phase-drift"
+    if chosen is not None and not direction_determined:
+        nu = abs(nu) * (-1.0 if sign < 0 else 1.0)
+    if direction_determined and sign != 0 and np.sign(nu) != sign:
+        determined = False
+        reasons.append(f"the phase drift says the readout runs {'top-to-bottom' if nu > 0 else 'bottom-to-top'}, "
+                       f"not {readout} as given")
+    direction = "bottom-to-top" if nu < 0 else "top-to-bottom"
+    if chosen is not None and not direction_determined:
+        if sign == 0:
+            warnings.append("readout direction not measured (no usable phase drift between timestamped frames): "
+                            "top-to-bottom assumed; the bands give |d| only")
+        direction += " (given)" if sign != 0 else " (assumed)"
+
+    # Vertical blanking: the frame period is (rows + blanking rows) x |d|.
+    blank = blank_std = blank_s = float("nan")
+    blank_ok = False
+    if determined and chosen is not None and chosen.get("method") == "phase-drift" and frame_interval:
+        intervals = np.diff(times)
+        d_abs = abs(nu) / f
+        blank = frame_interval / d_abs - rows
+        blank_std = frame_interval * std_total / d_abs ** 2
+        blank_s = frame_interval - d_abs * rows
+        regular = float(np.max(np.abs(intervals - frame_interval))) <= 0.001 * frame_interval
+        blank_ok = bool(regular and blank_std <= max(1.0, 0.01 * (rows + blank)) and blank > -3 * blank_std)
+        if not regular:
+            warnings.append("frame intervals are irregular: the vertical blanking is not determined")
+
+    if not determined:
+        warnings.append("the data do not determine the line delay: " + "; ".join(reasons))
 
     # plot material: a few frames' projected profiles with the fitted model
     plot: dict = {}
-    if chosen is not None and "nu" in chosen:
+    if chosen is not None and "nu" in chosen and model_yp is not None:
         show = np.unique(np.linspace(0, n - 1, min(n, 3)).round().astype(int))
-        if chosen["method"] == "phase-drift":
-            model = _pd_fit_curves(data, chosen["nu"], chosen["coef"], chosen["harmonics"])
-        else:
-            model = _frame_fit(data, chosen["nu"], chosen["harmonics"])
         with np.errstate(divide="ignore", invalid="ignore"):
             observed = np.where(data.sw > 0, data.yp / data.sw, np.nan)
+            model = np.where(data.sw > 0, model_yp / data.sw, np.nan)
         plot = {"rows_v": profiles.rows_v, "frames": show, "observed": observed[show], "model": model[show],
                 "grid_nu": chosen.get("grid_nu"), "grid_rss": chosen.get("grid_rss")}
 
@@ -641,12 +911,15 @@ def estimate_line_delay_flicker(frames: Any, frequency_hz: float, timestamps_s: 
         depth = float(np.nanmedian(np.nanmax(fits, axis=1) - np.nanmin(fits, axis=1)) / 2.0)
     return FlickerResult(
         line_delay_s=line_delay, line_delay_std_s=std_total, line_delay_std_fit_s=std_fit,
-        line_delay_std_spread_s=std_spread, readout_time_s=line_delay * rows, rows=rows, frequency_hz=f,
-        period_rows=1.0 / nu if nu and math.isfinite(nu) else float("nan"),
-        cycles_per_frame=nu * span if math.isfinite(nu) else float("nan"),
+        line_delay_std_spread_s=std_spread, readout_time_s=abs(line_delay) * rows, rows=rows, frequency_hz=f,
+        period_rows=1.0 / abs(nu) if nu and math.isfinite(nu) else float("nan"),
+        cycles_per_frame=abs(nu) * span if math.isfinite(nu) else float("nan"),
         method=chosen["method"] if chosen is not None else "none", detrend=data.detrend, frames_used=n,
         frames_total=profiles.frames_total, modulation_depth=depth, delta_chi2=float(delta_chi2),
         determined=bool(determined), warnings=warnings, estimates=summary_estimates, spread_label=label,
         spread_line_delays_s=spread_nu / f, timestamps_source=profiles.timestamps_source,
-        image_size=tuple(profiles.image_size), roi=profiles.roi,
+        image_size=tuple(profiles.image_size), roi=profiles.roi, readout_direction=direction,
+        direction_determined=bool(direction_determined), vertical_blanking_rows=blank,
+        vertical_blanking_std_rows=blank_std, vertical_blanking_s=blank_s, blanking_determined=blank_ok,
+        reason=None if determined else "; ".join(reasons), checks=checks, region=region_info,
         plot=dict(plot, seconds=time.perf_counter() - started))

@@ -1,5 +1,10 @@
-"""Row profiles of frames for the flicker method: the mean grey of each row over column strips,
-leaving out strips that clip in any frame (a clipped pixel does not follow the light)."""
+"""Row profiles of frames for the flicker method: the mean grey of each row in column strips.
+
+The strips are kept (``RowProfiles.strips``) so that :mod:`rscalib.flicker.region` can choose the
+strips and rows that carry bands; ``values`` is their combination (all strips until a region is
+chosen). Clipped pixels are data: a strip that clips is left out of a row only while some strip of
+that row stays unclipped (scene highlights); where the light itself clips (LED bands saturated or
+black), the clipped strips are used."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -11,14 +16,15 @@ from .._progress import Progress
 from ..errors import InputError
 
 MIN_ROWS = 16
-STRIPS = 32                      # column strips per row, for leaving out clipped pixels
+STRIPS = 32                      # column strips per row (region choice, clipped pixels)
+CLIPPED_FRACTION = 0.02          # a strip clips in a row when more of its pixels are at 0 or full scale
 
 
 @dataclass
 class RowProfiles:
     """Row profiles of a frame sequence: mean grey over the region's columns, one row per image row."""
 
-    values: np.ndarray                  # (frames, rows) linear grey levels; NaN: no unclipped pixels
+    values: np.ndarray                  # (frames, rows) linear grey levels; NaN: no strip used
     rows_v: np.ndarray                  # (rows,) image row of each column of `values`
     times_s: Optional[np.ndarray]       # (frames,) time of row 0; None when unknown
     image_size: tuple                   # (width, height)
@@ -28,6 +34,11 @@ class RowProfiles:
     timestamps_source: str = "given"
     roi: Optional[tuple] = None
     warnings: list = field(default_factory=list)
+    strips: Optional[np.ndarray] = field(default=None, repr=False)        # (frames, rows, S) strip means
+    strip_clipped: Optional[np.ndarray] = field(default=None, repr=False)  # (rows, S) clipped in some frame
+    strip_columns: Optional[np.ndarray] = None  # (S, 2) first and last+1 image column of each strip
+    region: dict = field(default_factory=dict)  # what rscalib.flicker.region chose (strips, rows, masks)
+    row_pixels: Optional[np.ndarray] = None     # (rows,) columns averaged in each row
 
 
 def _parse_roi(roi, width: int, height: int) -> tuple[slice, slice, Optional[tuple]]:
@@ -94,9 +105,9 @@ def read_row_profiles(frames: Any, timestamps_s: Optional[Sequence[float]] = Non
 
 def _profiles(items, total, timestamps_s, roi, max_frames, progress, timestamps_source,
               source_times: bool = False) -> RowProfiles:
-    # Columns are averaged in strips, and a strip is left out of a row when it clips (full scale or
-    # 0) in any frame: a clipped pixel does not follow the light, and the same strips must be used
-    # in every frame for the scene to cancel.
+    # Columns are averaged in strips; a strip "clips" in a row when more than CLIPPED_FRACTION of
+    # its pixels sit at 0 or full scale in some frame (combine_strips decides what that means). The
+    # same strips are used in every frame, so that the scene cancels.
     strips, clipped, times, size, full_scale, rows_slice, cols_slice, roi_used = [], None, [], None, None, None, None, None
     edges = None
     seen, skipped = 0, 0
@@ -126,8 +137,8 @@ def _profiles(items, total, timestamps_s, roi, max_frames, progress, timestamps_
                 clipped = np.zeros((block.shape[0], len(edges)), dtype=bool)
             strips.append((np.add.reduceat(block, edges, axis=1, dtype=np.float64) / widths).astype(np.float32))
             if full_scale is not None:
-                clipped |= np.maximum.reduceat(block, edges, axis=1) >= full_scale
-                clipped |= np.minimum.reduceat(block, edges, axis=1) <= 0
+                at_limit = (block >= full_scale) | (block <= 0)
+                clipped |= np.add.reduceat(at_limit, edges, axis=1) > CLIPPED_FRACTION * widths
             times.append(time_s)
             bar.advance()
             if limit is not None and len(strips) >= limit:
@@ -147,9 +158,29 @@ def _profiles(items, total, timestamps_s, roi, max_frames, progress, timestamps_
         times_s = np.asarray(times, dtype=np.float64)
     if times_s is not None and (not np.all(np.isfinite(times_s)) or np.any(np.diff(times_s) <= 0)):
         raise InputError("frame timestamps must be finite and strictly increasing")
-    keep = (~clipped) * widths[None, :]
+    columns = np.column_stack([edges, np.append(edges[1:], block.shape[1])]) + cols_slice.start
+    result = RowProfiles(values=np.zeros((len(strips), block.shape[0])),
+                         rows_v=np.arange(size[1], dtype=np.float64)[rows_slice], times_s=times_s,
+                         image_size=size, full_scale=full_scale, frames_total=seen, frames_skipped=skipped,
+                         timestamps_source=timestamps_source, roi=roi_used, strips=np.array(strips),
+                         strip_clipped=clipped, strip_columns=columns)
+    result.values = combine_strips(result)
+    return result
+
+
+def combine_strips(profiles: RowProfiles, use: Optional[np.ndarray] = None,
+                   gains: Optional[np.ndarray] = None) -> np.ndarray:
+    """(frames, rows) weighted mean of the strips ``use`` (rows, S) bool (all when None), each
+    scaled by ``gains`` (S,). In a row, clipped strips are left out while some used strip stays
+    unclipped; otherwise (the light itself clips) every used strip counts. Sets
+    ``profiles.row_pixels`` (columns averaged in each row)."""
+    strips = profiles.strips
+    widths = np.diff(profiles.strip_columns, axis=1)[:, 0].astype(np.float64)
+    use = np.ones(strips.shape[1:], dtype=bool) if use is None else use
+    unclipped = use & ~profiles.strip_clipped
+    mostly = unclipped.sum(axis=1) >= 1
+    keep = np.where(mostly[:, None], unclipped, use) * widths[None, :]
+    scaled = strips if gains is None else strips * np.asarray(gains, dtype=np.float32)[None, None, :]
+    profiles.row_pixels = keep.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        values = np.einsum("nrs,rs->nr", np.array(strips, dtype=np.float64), keep) / keep.sum(axis=1)
-    return RowProfiles(values=values, rows_v=np.arange(size[1], dtype=np.float64)[rows_slice],
-                       times_s=times_s, image_size=size, full_scale=full_scale, frames_total=seen,
-                       frames_skipped=skipped, timestamps_source=timestamps_source, roi=roi_used)
+        return np.einsum("nrs,rs->nr", scaled.astype(np.float64), keep) / keep.sum(axis=1)
