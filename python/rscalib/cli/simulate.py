@@ -61,12 +61,35 @@ def add_parser(sub) -> None:
     p.add_argument("--flicker-phase", type=float, default=0.0, metavar="RAD", help="flicker phase at t = 0, radians (0)")
     p.add_argument("--workers", type=int, default=None, metavar="N", help="rendering threads (default: up to 4)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p.add_argument("--scene", action="store_true",
+                   help="instead of a target video: a hand-held walk through a textured room, seen by the "
+                        "self-calibration paper's 320x240 camera (PNG frames, timestamps.txt, truth.json in OUT), "
+                        "for `rscalib selfcalib OUT --pixel-size-mm 0.0112`; uses --duration, --fps, --seed, --noise")
     p.set_defaults(func=run)
+
+
+def run_scene(args: argparse.Namespace) -> int:
+    """`--scene`: a self-calibration sequence (rscalib.sim.scene_video) with its truth."""
+    from ..selfcalib.prior import PAPER_CAMERA_PARAMS, PAPER_PIXEL_SIZE_MM
+    from ..sim.scene_video import render_scene_sequence
+
+    if not (args.duration > 0 and args.fps > 0):
+        raise InputError("--duration and --fps must be positive")
+    num_frames = max(2, int(round(args.duration * args.fps)))
+    render_scene_sequence(args.out, num_frames=num_frames, seed=args.seed, fps=args.fps, noise_sigma=args.noise)
+    if not args.quiet:
+        f, cx, cy, k1, k2 = PAPER_CAMERA_PARAMS
+        print(f"rscalib simulate --scene: {num_frames} frames 320x240 at {args.fps:g} fps in {args.out}; truth "
+              f"f {f} px, (cx, cy) ({cx}, {cy}) px, k1 {k1} mm^-2, k2 {k2} mm^-4")
+        print(f"  try: rscalib selfcalib {args.out} --pixel-size-mm {PAPER_PIXEL_SIZE_MM} --out selfcal")
+    return EXIT_OK
 
 
 def run(args: argparse.Namespace) -> int:
     from ..sim.target_video import render_video
 
+    if args.scene:
+        return run_scene(args)
     if args.no_video and not args.frames_dir:
         raise InputError("--no-video needs --frames-dir (nothing would be written)")
     if args.workers is not None and args.workers < 1:
