@@ -81,3 +81,24 @@ def test_demo_runs():
     assert "Traceback" not in result.stderr
     assert f"rscalib {version('rscalib')} demo" in result.stdout
     assert len(result.stdout.splitlines()) >= 3
+
+
+def test_simulate_scene_writes_a_self_calibration_sequence(tmp_path):
+    """`simulate --scene`: PNG frames, timestamps.txt and truth.json with the paper's camera, which
+    `selfcalib` reads as an image folder."""
+    import json
+
+    out = tmp_path / "room"
+    result = run("simulate", "--scene", "--out", str(out), "--duration", "0.2", "--fps", "20", "--quiet",
+                 timeout=300)
+    assert result.returncode == 0, result.stderr
+    frames = sorted(out.glob("frame_*.png"))
+    assert len(frames) == 4
+    times = [float(t) for t in (out / "timestamps.txt").read_text().split()]
+    assert times == pytest.approx([0.0, 0.05, 0.1, 0.15])
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["camera"]["model"] == "civera-radial"
+    assert truth["camera"]["params"][0] == pytest.approx(194.06)
+    assert (truth["camera"]["width"], truth["camera"]["height"]) == (320, 240)
+    bad = run("simulate", "--scene", "--out", str(tmp_path / "x"), "--duration", "0")
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
