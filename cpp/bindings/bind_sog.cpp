@@ -141,6 +141,12 @@ Options of the SOG self-calibration bank (docs/sog.md §9). SI units; pixels in 
                      "inverse depth -> XYZ below this linearity index (<= 0: never)")
       .def_readwrite("deletion_min_predictions", &SogOptions::deletion_min_predictions)
       .def_readwrite("deletion_min_match_ratio", &SogOptions::deletion_min_match_ratio)
+      .def_readwrite("max_features", &SogOptions::max_features,
+                     "map cap: features matched longest ago are deleted beyond it (<= 0: no cap)")
+      .def_readwrite("ransac_hypotheses", &SogOptions::ransac_hypotheses,
+                     "1-point RANSAC hypotheses per frame (Civera et al. 2010; 0: off)")
+      .def_readwrite("ransac_threshold_px", &SogOptions::ransac_threshold_px,
+                     "1-point RANSAC: low-innovation inlier threshold (px)")
       .def_readwrite(
           "gate_chi2", &SogOptions::gate_chi2,
           "matches beyond this Mahalanobis^2 of the merged prediction are not used (<= 0: no gate)")
@@ -197,6 +203,12 @@ Options of the SOG self-calibration bank (docs/sog.md §9). SI units; pixels in 
           "converted_feature_ids",
           [](const SogUpdateReport& r) { return IdArray(r.converted_feature_ids); })
       .def_readonly("num_used", &SogUpdateReport::num_used)
+      .def_readonly("num_low_innovation", &SogUpdateReport::num_low_innovation,
+                    "1-point RANSAC inliers (num_used without RANSAC)")
+      .def_readonly("num_rescued", &SogUpdateReport::num_rescued,
+                    "1-point RANSAC: matches used in the rescue update")
+      .def_readonly("num_capped", &SogUpdateReport::num_capped,
+                    "features deleted by the map cap (max_features)")
       .def_readonly("num_gaussians", &SogUpdateReport::num_gaussians)
       .def_readonly("pruning_active", &SogUpdateReport::pruning_active);
 

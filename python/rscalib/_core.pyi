@@ -571,6 +571,14 @@ class SogOptions:
     def linearity_threshold(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
+    def max_features(self) -> int:
+        """
+        map cap: features matched longest ago are deleted beyond it (<= 0: no cap)
+        """
+    @max_features.setter
+    def max_features(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
     def merge_mahalanobis2(self) -> float:
         """
         while pruning, merge Gaussians whose calibrations are closer than this (<= 0: never)
@@ -599,6 +607,22 @@ class SogOptions:
         """
     @pixel_sigma.setter
     def pixel_sigma(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def ransac_hypotheses(self) -> int:
+        """
+        1-point RANSAC hypotheses per frame (Civera et al. 2010; 0: off)
+        """
+    @ransac_hypotheses.setter
+    def ransac_hypotheses(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def ransac_threshold_px(self) -> float:
+        """
+        1-point RANSAC: low-innovation inlier threshold (px)
+        """
+    @ransac_threshold_px.setter
+    def ransac_threshold_px(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def sprt_alpha(self) -> float:
@@ -674,8 +698,23 @@ class SogUpdateReport:
         per Gaussian: nu^T S^-1 nu (expect ~ 2 num_used)
         """
     @property
+    def num_capped(self) -> int:
+        """
+        features deleted by the map cap (max_features)
+        """
+    @property
     def num_gaussians(self) -> int:
         ...
+    @property
+    def num_low_innovation(self) -> int:
+        """
+        1-point RANSAC inliers (num_used without RANSAC)
+        """
+    @property
+    def num_rescued(self) -> int:
+        """
+        1-point RANSAC: matches used in the rescue update
+        """
     @property
     def num_used(self) -> int:
         ...

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <string>
 #include <thread>
 
@@ -13,6 +14,7 @@
 
 #include "rscalib/core/error.hpp"
 #include "rscalib/sog/inverse_depth.hpp"
+#include "rscalib/sog/measurement_model.hpp"
 #include "rscalib/sog/mixture.hpp"
 #include "rscalib/sog/sprt.hpp"
 
@@ -209,7 +211,8 @@ SogUpdateReport SogBank::Update(const std::vector<int64_t>& ids,
   SogUpdateReport report;
   report.used.assign(rows, false);
   report.gate_chi2.assign(rows, std::numeric_limits<double>::quiet_NaN());
-  std::vector<int> used_rows;
+  // Gate every match against the merged prediction (99 %).
+  std::vector<int> gated_rows;
   for (size_t r = 0; r < rows; ++r) {
     map_[indices[r]].times_predicted += 1;
     if (!matched[r] || !uv[r].allFinite()) continue;
@@ -219,40 +222,63 @@ SogUpdateReport SogBank::Update(const std::vector<int64_t>& ids,
     const Eigen::Vector2d d = uv[r] - mean;
     report.gate_chi2[r] = d.dot(cov.ldlt().solve(d));
     if (options_.gate_chi2 > 0.0 && !(report.gate_chi2[r] <= options_.gate_chi2)) continue;
-    report.used[r] = true;
-    map_[indices[r]].times_matched += 1;
-    used_rows.push_back(static_cast<int>(r));
+    gated_rows.push_back(static_cast<int>(r));
   }
-  report.num_used = static_cast<int>(used_rows.size());
+  // 1-point RANSAC (optional): the low-innovation inliers first, then the rest re-gated.
+  std::vector<int> first_rows = gated_rows, rest_rows;
+  if (options_.ransac_hypotheses > 0 && gated_rows.size() >= 3) {
+    const std::vector<int> inliers = OnePointRansac(indices, gated_rows, uv);
+    if (!inliers.empty()) {
+      first_rows = inliers;
+      std::vector<bool> is_inlier(rows, false);
+      for (int r : inliers) is_inlier[r] = true;
+      for (int r : gated_rows)
+        if (!is_inlier[r]) rest_rows.push_back(r);
+    }
+  }
+  report.num_low_innovation = static_cast<int>(first_rows.size());
 
   // Every filter is updated with the same measurements (its own H, S, gain). A filter that
   // cannot predict one of them is charged a fixed log-likelihood for it instead.
   const int n_filters = num_gaussians();
   Eigen::VectorXd log_lik = Eigen::VectorXd::Zero(n_filters);
   Eigen::VectorXd nis = Eigen::VectorXd::Zero(n_filters);
-  const UpdateSettings settings{options_.pixel_sigma, options_.update_iterations, pixel_size_mm_};
-  ForEachFilter([&](int i) {
-    std::vector<int> idx;
-    std::vector<FeaturePrediction> preds;
-    std::vector<Eigen::Vector2d> z;
-    int unpredicted = 0;
-    for (int r : used_rows) {
-      const FeaturePrediction& p = predictions_[i][indices[r]];
-      if (!p.valid) {
-        ++unpredicted;
-        continue;
-      }
-      idx.push_back(indices[r]);
-      preds.push_back(p);
-      z.push_back(uv[r]);
-    }
-    double ll = 0.0;
-    if (!filters_[i].Update(map_, idx, preds, z, settings, &ll, &nis[i]) ||
-        !filters_[i].IsFinite() || !(filters_[i].mean()[0] > 0.0))
-      ll = -kInf;  // a diverged filter: drop it
-    log_lik[i] = ll + unpredicted * options_.unpredicted_log_likelihood;
-  });
+  UpdateFilters(indices, first_rows, uv, &log_lik, &nis);
   predicted_.assign(map_.size(), false);
+  std::vector<int> used_rows = first_rows;
+  if (!rest_rows.empty()) {
+    // Rescue (Civera et al. 2010): re-predict after the low-innovation update; matches now
+    // inside the 99 % gate are used in a second update (p(z1) p(z2 | z1): the log-likelihoods add).
+    std::vector<int> rest_indices;
+    for (int r : rest_rows) rest_indices.push_back(indices[r]);
+    EnsurePredictions(rest_indices);
+    std::vector<int> rescued;
+    for (int r : rest_rows) {
+      Eigen::Vector2d mean;
+      Eigen::Matrix2d cov;
+      if (!MergePrediction(indices[r], &mean, &cov)) continue;
+      const Eigen::Vector2d d = uv[r] - mean;
+      report.gate_chi2[r] = d.dot(cov.ldlt().solve(d));
+      if (options_.gate_chi2 > 0.0 && !(report.gate_chi2[r] <= options_.gate_chi2)) continue;
+      rescued.push_back(r);
+    }
+    if (!rescued.empty()) {
+      Eigen::VectorXd ll2 = Eigen::VectorXd::Zero(n_filters),
+                      nis2 = Eigen::VectorXd::Zero(n_filters);
+      UpdateFilters(indices, rescued, uv, &ll2, &nis2);
+      log_lik += ll2;
+      nis += nis2;
+      predicted_.assign(map_.size(), false);
+      used_rows.insert(used_rows.end(), rescued.begin(), rescued.end());
+    }
+    report.num_rescued = static_cast<int>(rescued.size());
+  }
+  for (int r : used_rows) {
+    report.used[r] = true;
+    map_[indices[r]].times_matched += 1;
+    map_[indices[r]].frame_last_matched = frame_;
+  }
+  report.num_used = static_cast<int>(used_rows.size());
   report.log_likelihoods = log_lik;
   report.nis = nis;
   report.gaussian_ids = gaussian_ids_;
@@ -299,8 +325,89 @@ SogUpdateReport SogBank::Update(const std::vector<int64_t>& ids,
   Prune(remove, &report);
   report.pruning_active = pruning_active_;
   report.num_gaussians = num_gaussians();
-  ManageMap(&report);
+  ManageMap(indices, &report);
   return report;
+}
+
+void SogBank::UpdateFilters(const std::vector<int>& indices, const std::vector<int>& rows,
+                            const std::vector<Eigen::Vector2d>& uv, Eigen::VectorXd* log_lik,
+                            Eigen::VectorXd* nis) {
+  const UpdateSettings settings{options_.pixel_sigma, options_.update_iterations, pixel_size_mm_};
+  ForEachFilter([&](int i) {
+    std::vector<int> idx;
+    std::vector<FeaturePrediction> preds;
+    std::vector<Eigen::Vector2d> z;
+    int unpredicted = 0;
+    for (int r : rows) {
+      const FeaturePrediction& p = predictions_[i][indices[r]];
+      if (!p.valid) {
+        ++unpredicted;
+        continue;
+      }
+      idx.push_back(indices[r]);
+      preds.push_back(p);
+      z.push_back(uv[r]);
+    }
+    double ll = 0.0;
+    if (!filters_[i].Update(map_, idx, preds, z, settings, &ll, &(*nis)[i]) ||
+        !filters_[i].IsFinite() || !(filters_[i].mean()[0] > 0.0))
+      ll = -kInf;  // a diverged filter: drop it
+    (*log_lik)[i] = ll + unpredicted * options_.unpredicted_log_likelihood;
+  });
+}
+
+std::vector<int> SogBank::OnePointRansac(const std::vector<int>& indices,
+                                         const std::vector<int>& rows,
+                                         const std::vector<Eigen::Vector2d>& uv) const {
+  // Hypotheses from the leading filter: the state after an EKF update with one match; its
+  // support is the matches it predicts within ransac_threshold_px. Deterministic per frame.
+  const int lead = leading_gaussian();
+  const SelfCalibrationEkf& filter = filters_[lead];
+  const Eigen::VectorXd& x = filter.mean();
+  const Eigen::MatrixXd& p = filter.covariance();
+  std::vector<int> candidates;
+  for (int r : rows)
+    if (predictions_[lead][indices[r]].valid) candidates.push_back(r);
+  const int count = static_cast<int>(candidates.size());
+  if (count < 3) return {};
+  std::mt19937 rng(static_cast<uint32_t>(frame_) * 2654435761u + 12345u);
+  std::uniform_int_distribution<int> pick(0, count - 1);
+  const double threshold2 = options_.ransac_threshold_px * options_.ransac_threshold_px;
+  std::vector<int> best;
+  int hypotheses = options_.ransac_hypotheses;
+  Eigen::VectorXd xh(x.size());
+  for (int h = 0; h < hypotheses; ++h) {
+    const int r = candidates[pick(rng)];
+    const FeaturePrediction& pr = predictions_[lead][indices[r]];
+    const MapFeature& f = map_[indices[r]];
+    const int d = FeatureDim(f.kind);
+    Eigen::MatrixXd pht = p.leftCols<12>() * pr.d_uv_d_camera.transpose();
+    pht.noalias() += p.middleCols(f.offset, d) * pr.d_uv_d_feature.leftCols(d).transpose();
+    const Eigen::Vector2d nu = uv[r] - pr.uv;
+    xh = x + pht * pr.innovation_covariance.ldlt().solve(nu);
+    if (!xh.allFinite()) continue;
+    std::vector<int> support;
+    for (int k : candidates) {
+      const MapFeature& g = map_[indices[k]];
+      Eigen::Vector2d predicted;
+      if (!ProjectFeature<double>(xh.data(), pixel_size_mm_.data(), g.kind, xh.data() + g.offset,
+                                  predicted.data()))
+        continue;
+      if ((uv[k] - predicted).squaredNorm() <= threshold2) support.push_back(k);
+    }
+    if (support.size() > best.size()) {
+      best.swap(support);
+      // Hypotheses for 99 % confidence of one all-inlier draw at this inlier ratio.
+      const double inlier_ratio = static_cast<double>(best.size()) / count;
+      if (inlier_ratio >= 1.0) break;
+      const double needed = std::log(0.01) / std::log(1.0 - inlier_ratio);
+      hypotheses = std::min(options_.ransac_hypotheses,
+                            std::max(h + 1, static_cast<int>(std::ceil(needed))));
+    }
+  }
+  if (best.size() < 3) return {};
+  std::sort(best.begin(), best.end());
+  return best;
 }
 
 void SogBank::MergeConverged(std::vector<bool>* remove, SogUpdateReport* report) {
@@ -367,7 +474,7 @@ void SogBank::Prune(const std::vector<bool>& remove, SogUpdateReport* report) {
   predictions_.swap(predictions);
 }
 
-void SogBank::ManageMap(SogUpdateReport* report) {
+void SogBank::ManageMap(const std::vector<int>& searched, SogUpdateReport* report) {
   const int count = map_.size();
   std::vector<bool> remove(count, false), convert(count, false);
   for (int k = 0; k < count; ++k) {
@@ -394,6 +501,26 @@ void SogBank::ManageMap(SogUpdateReport* report) {
       double worst = 0.0;
       for (int i = 0; i < num_gaussians(); ++i) worst = std::max(worst, index[i][k]);
       convert[k] = worst < options_.linearity_threshold;
+    }
+  }
+  if (options_.max_features > 0) {
+    // The cap: delete the features matched longest ago, those not searched this frame first.
+    std::vector<bool> was_searched(count, false);
+    for (int k : searched) was_searched[k] = true;
+    std::vector<int> kept;
+    for (int k = 0; k < count; ++k)
+      if (!remove[k]) kept.push_back(k);
+    const int excess = static_cast<int>(kept.size()) - options_.max_features;
+    if (excess > 0) {
+      const auto recency = [&](int k) {
+        return std::max(map_[k].frame_last_matched, map_[k].frame_added);
+      };
+      std::stable_sort(kept.begin(), kept.end(), [&](int a, int b) {
+        if (was_searched[a] != was_searched[b]) return !was_searched[a];
+        return recency(a) < recency(b);
+      });
+      for (int j = 0; j < excess; ++j) remove[kept[j]] = true;
+      report->num_capped = excess;
     }
   }
   for (int k = 0; k < count; ++k) {

@@ -3,9 +3,12 @@ pinhole-radtan camera closest to the civera-radial estimate) and history.png (th
 their 99 % bounds and the number of Gaussians per frame)."""
 from __future__ import annotations
 
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
+
+import numpy as np
 
 from ..io.cameras import write_opencv_yaml
 from ..io.results import write_result_json
@@ -43,8 +46,23 @@ def write_selfcalib_outputs(result: SelfCalibResult, out_dir, *, extra: Optional
                             opencv_max_difference_px=max_error)
 
 
+def _readable_limits(mean: np.ndarray, lo: np.ndarray, hi: np.ndarray, extra=()) -> tuple[float, float]:
+    """y limits that show the estimate and its 99 % band after the first fifth of the frames (the
+    first frames span the whole prior and would flatten the rest)."""
+    start = len(mean) // 5
+    values = np.concatenate([mean[start:], lo[start:], hi[start:], np.asarray(extra, float)])
+    values = values[np.isfinite(values)]
+    if not len(values):
+        return 0.0, 1.0
+    a, b = float(values.min()), float(values.max())
+    pad = 0.08 * (b - a) if b > a else max(abs(a) * 0.01, 1e-6)
+    return a - pad, b + pad
+
+
 def plot_history(result: SelfCalibResult, path: Path) -> None:
-    """The five estimates with their 99 % bounds, and the number of Gaussians, per frame."""
+    """The five estimates with the bank's 99 % bounds per frame (f on its own large panel, its axis
+    fitted to the band), the frame where the bank collapsed to one Gaussian, the restarts'
+    estimates and the reported bounds at the end, the number of Gaussians, and the verdict."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -52,18 +70,39 @@ def plot_history(result: SelfCalibResult, path: Path) -> None:
 
     units = {"f": "px", "cx": "px", "cy": "px", "k1": "mm⁻²", "k2": "mm⁻⁴"}
     history = result.history
-    fig, axes = plt.subplots(6, 1, figsize=(8, 12), sharex=True)
+    fig, axes = plt.subplots(6, 1, figsize=(9, 13), sharex=True, gridspec_kw={"height_ratios": [3, 1, 1, 1, 1, 1]})
+    last = history.frame[-1] if len(history) else 0
+    collapse = result.collapse_frame
     for i, name in enumerate(PARAM_NAMES):
         ax = axes[i]
-        ax.fill_between(history.frame, history.bounds_99[:, i, 0], history.bounds_99[:, i, 1], alpha=0.3,
-                        label="99 % bounds")
+        lo, hi = history.bounds_99[:, i, 0], history.bounds_99[:, i, 1]
+        ax.fill_between(history.frame, lo, hi, alpha=0.3, label="99 % band (bank)")
         ax.plot(history.frame, history.mean[:, i], lw=1.2, label="estimate")
+        ends = [r.mean[i] for r in result.restarts]
+        if ends:
+            ax.plot([last] * len(ends), ends, "k>", ms=6, label="restarts (end)")
+        rep = result.bounds_99[i]
+        ax.vlines([last], rep[0], rep[1], color="C3", lw=3, label="reported 99 % bounds")
+        ax.plot([last], [result.mean[i]], "o", color="C3")
+        if collapse is not None:
+            ax.axvline(collapse, color="0.4", ls="--", lw=0.8, label="one Gaussian left" if i == 0 else None)
+        if result.determined:
+            ax.set_ylim(*_readable_limits(history.mean[:, i], lo, hi, ends))
+        else:
+            ax.set_ylim(*_readable_limits(history.mean[:, i], lo, hi, [*ends, *rep]))
         ax.set_ylabel(f"{name} ({units[name]})")
-    axes[0].legend(fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, loc="best")
     axes[5].semilogy(history.frame, history.gaussians, lw=1.2, color="C3")
+    if collapse is not None:
+        axes[5].axvline(collapse, color="0.4", ls="--", lw=0.8)
     axes[5].set_ylabel("Gaussians")
     axes[5].set_xlabel("frame")
-    axes[0].set_title("Self-calibration: estimates with 99 % bounds, and the number of Gaussians")
+    m, b = result.mean, result.bounds_99
+    verdict = {True: "DETERMINED", False: "NOT DETERMINED", None: "NOT CHECKED"}[result.determined]
+    title = (f"{verdict}: f {m[0]:.1f} px, reported 99 % [{b[0, 0]:.1f}, {b[0, 1]:.1f}]"
+             + (f"; one Gaussian from frame {collapse}" if collapse is not None else ""))
+    fig.suptitle(title + "\n" + textwrap.fill(result.reason, 110), fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

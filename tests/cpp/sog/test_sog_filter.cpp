@@ -441,3 +441,56 @@ TEST(SogBank, RejectsBadInput) {
   EXPECT_THROW(bank.Predict(-1.0), rscalib::InputError);
   EXPECT_THROW(bank.RemoveFeatures({7}), rscalib::InputError);
 }
+
+TEST(SogBank, MapCapDeletesTheFeaturesMatchedLongestAgoUnsearchedFirst) {
+  SogOptions options;
+  options.max_features = 4;
+  options.linearity_threshold = 0.0;
+  const std::vector<Vector5d> means(1, PaperCalibration());
+  const std::vector<Matrix5d> covs(1, PaperCalibrationCovariance());
+  SogBank bank(options, means, covs, {1.0}, 320, 240, kPixelMm);
+  bank.SetCameraState(StartMotion(), StartMotionCovariance());
+  const std::vector<int64_t> old_ids = bank.AddFeatures(
+      {Eigen::Vector2d(100, 80), Eigen::Vector2d(200, 150), Eigen::Vector2d(160, 120)});
+  SogUpdateReport report = bank.Update({}, {}, {});
+  EXPECT_EQ(report.num_capped, 0);
+  const std::vector<int64_t> new_ids = bank.AddFeatures(
+      {Eigen::Vector2d(60, 60), Eigen::Vector2d(250, 60), Eigen::Vector2d(60, 200)});
+  EXPECT_EQ(bank.map().size(), 6);
+  bank.Predict(1.0 / 30.0);
+  // Feature old_ids[2] is searched (not found); old_ids[0..1] are not searched: they go first.
+  report = bank.Update({old_ids[2]}, {Eigen::Vector2d(0, 0)}, {false});
+  EXPECT_EQ(report.num_capped, 2);
+  EXPECT_EQ(bank.map().size(), 4);
+  EXPECT_EQ(bank.map().IndexOf(old_ids[0]), -1);
+  EXPECT_EQ(bank.map().IndexOf(old_ids[1]), -1);
+  EXPECT_GE(bank.map().IndexOf(old_ids[2]), 0);
+  for (int64_t id : new_ids) EXPECT_GE(bank.map().IndexOf(id), 0);
+  EXPECT_EQ(report.deleted_feature_ids.size(), 2u);
+}
+
+TEST(SogBank, OnePointRansacRejectsAGrossOutlierAndKeepsTheInliers) {
+  SogOptions options;
+  options.ransac_hypotheses = 30;
+  options.linearity_threshold = 0.0;
+  const std::vector<Vector5d> means(1, PaperCalibration());
+  const std::vector<Matrix5d> covs(1, PaperCalibrationCovariance());
+  SogBank bank(options, means, covs, {1.0}, 320, 240, kPixelMm);
+  bank.SetCameraState(StartMotion(), StartMotionCovariance());
+  std::vector<Eigen::Vector2d> uv;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 3; ++j) uv.emplace_back(60.0 + 60.0 * i, 50.0 + 60.0 * j);
+  bank.AddFeatures(uv);
+  bank.Update({}, {}, {});
+  bank.Predict(1.0 / 30.0);
+  const MergedPredictions merged = bank.PredictMeasurements();
+  ASSERT_EQ(merged.ids.size(), uv.size());
+  std::vector<Eigen::Vector2d> z = merged.uv;
+  for (auto& p : z) p += Eigen::Vector2d(0.5, -0.3);  // a common shift: consistent with one motion
+  z[4] += Eigen::Vector2d(6.0, 5.0);                  // one wrong match, inside the wide gate
+  const SogUpdateReport report =
+      bank.Update(merged.ids, z, std::vector<bool>(merged.ids.size(), true));
+  EXPECT_EQ(report.num_low_innovation, static_cast<int>(uv.size()) - 1);
+  EXPECT_FALSE(report.used[4]);
+  EXPECT_EQ(report.num_used, static_cast<int>(uv.size()) - 1);
+}

@@ -110,7 +110,7 @@ def test_selfcalib_single_ekf_option_runs_one_gaussian_from_f0(room_sequence, tm
     proc = subprocess.run([*CLI, "selfcalib", room_sequence, "--out", tmp_path / "one", "--quiet", "--bank", "single",
                            "--f0", "260", "--f-sigma", "60", "--max-frames", "20"],
                           capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
+    assert proc.returncode in (0, 3), proc.stderr     # 20 frames need not determine f (restarts judge it)
     result = json.loads((tmp_path / "one" / "result.json").read_text())
     assert result["bank"] == "single"
     assert result["gaussians_initial"] == 1 and result["gaussians_left"] == 1

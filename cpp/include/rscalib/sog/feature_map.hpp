@@ -17,6 +17,7 @@ struct MapFeature {
   int times_predicted = 0;  // searched for (predicted visible)
   int times_matched = 0;    // found and used in an update
   int64_t frame_added = 0;
+  int64_t frame_last_matched = -1;  // bank frame of the last use in an update (-1: never)
 };
 
 // What a restructuring does to every filter's state: features converted from inverse depth

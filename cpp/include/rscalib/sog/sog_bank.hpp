@@ -32,6 +32,17 @@ struct SogOptions {
   double linearity_threshold = 0.1;
   int deletion_min_predictions = 5;
   double deletion_min_match_ratio = 0.5;
+  // Map cap (bounded memory and time; docs/sog.md §8): after every update the map holds at
+  // most max_features features; beyond that the features matched longest ago are deleted,
+  // those not searched in this frame (out of view) first. AddFeatures may exceed the cap
+  // until the next update by what it adds. <= 0: no cap.
+  int max_features = 100;
+  // 1-point RANSAC (Civera, Grasa, Davison, Montiel, JFR 2010): ransac_hypotheses > 0 picks
+  // the matches consistent with a one-match update of the leading filter within
+  // ransac_threshold_px ("low-innovation inliers"), updates every filter with them, then
+  // re-predicts the rest and also uses those inside the 99 % gate ("rescued"). 0: off.
+  int ransac_hypotheses = 0;
+  double ransac_threshold_px = 2.0;
   // Active search: a match farther than gate_chi2 (Mahalanobis^2 under the merged predicted
   // Gaussian) is treated as not found (<= 0: no gate). A feature is predicted visible when
   // filters holding at least visibility_min_weight of the weight project it.
@@ -84,7 +95,10 @@ struct SogUpdateReport {
   std::vector<int64_t> deleted_feature_ids;
   std::vector<int64_t> converted_feature_ids;
   int num_used = 0;
-  int num_gaussians = 0;  // after pruning
+  int num_low_innovation = 0;  // 1-point RANSAC: inliers of the best hypothesis (else num_used)
+  int num_rescued = 0;         // 1-point RANSAC: used in the second (rescue) update
+  int num_capped = 0;          // features deleted by the map cap (max_features)
+  int num_gaussians = 0;       // after pruning
   bool pruning_active = false;
 };
 
@@ -139,7 +153,12 @@ class SogBank {
   bool MergePrediction(int index, Eigen::Vector2d* uv, Eigen::Matrix2d* covariance) const;
   void MergeConverged(std::vector<bool>* remove, SogUpdateReport* report);
   void Prune(const std::vector<bool>& remove, SogUpdateReport* report);
-  void ManageMap(SogUpdateReport* report);
+  void ManageMap(const std::vector<int>& searched, SogUpdateReport* report);
+  std::vector<int> OnePointRansac(const std::vector<int>& indices, const std::vector<int>& rows,
+                                  const std::vector<Eigen::Vector2d>& uv) const;
+  void UpdateFilters(const std::vector<int>& indices, const std::vector<int>& rows,
+                     const std::vector<Eigen::Vector2d>& uv, Eigen::VectorXd* log_lik,
+                     Eigen::VectorXd* nis);
   void Restructure(const std::vector<bool>& remove, const std::vector<bool>& convert);
 
   SogOptions options_;

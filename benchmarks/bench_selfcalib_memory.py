@@ -1,0 +1,44 @@
+"""Peak memory and map size of self-calibration at 640x480 (issue 11; docs/sog.md §15): the real desk
+video (../shared/data/real_selfcalib_s3phone) played at STEP x speed, forth and back, for FRAMES frames.
+
+Usage: .venv/bin/python benchmarks/bench_selfcalib_memory.py STEP FRAMES [MAX_FEATURES]
+  e.g. 4 1000 (peak RSS at 1000 frames); 12 400 0 (no cap: the map grows) vs 12 400 100.
+"""
+from __future__ import annotations
+
+import resource
+import sys
+import time
+from pathlib import Path
+
+from rscalib import _core
+from rscalib.selfcalib.calibrate import read_gray_frames, self_calibrate
+
+VIDEO = Path(__file__).resolve().parents[2] / "shared" / "data" / "real_selfcalib_s3phone" / "escritorio_traslacion.mp4"
+
+
+def main() -> None:
+    step, count = int(sys.argv[1]), int(sys.argv[2])
+    cap = int(sys.argv[3]) if len(sys.argv) > 3 else None
+    images = [image for _, image in read_gray_frames(VIDEO).frames][::step]
+    loop = images + images[-2:0:-1]
+    frames = [(k / 30.0, loop[k % len(loop)]) for k in range(count)]
+    options = _core.SogOptions()
+    if cap is not None:
+        options.max_features = cap
+    started = time.time()
+    maps = []
+
+    def on_frame(k, bank, report):
+        maps.append(bank.num_features)
+
+    result = self_calibrate(frames, (640, 480), pixel_size_mm=0.0070216, options=options, on_frame=on_frame,
+                            restarts=False)
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    elapsed = time.time() - started
+    print(f"step {step}, {count} frames, max_features {options.max_features}: map max {max(maps)}, "
+          f"peak RSS {peak_mb:.0f} MB, {elapsed:.0f} s ({count / elapsed:.1f} frames/s), f {result.mean[0]:.1f} px")
+
+
+if __name__ == "__main__":
+    main()
