@@ -198,6 +198,14 @@ class RsSolverOptions:
     def num_threads(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
+    def observation_sigma(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        """
+        optional per-observation sigma (M values, px); empty: pixel_sigma for all
+        """
+    @observation_sigma.setter
+    def observation_sigma(self, arg0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"]) -> None:
+        ...
+    @property
     def parameter_tolerance(self) -> float:
         ...
     @parameter_tolerance.setter
