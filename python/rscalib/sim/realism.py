@@ -247,6 +247,11 @@ def encode_decode(frames: Sequence[np.ndarray], fps: float, bits_per_pixel: floa
     return out, "mpeg4 (OpenCV mp4v)"
 
 
+def _uv_lists(frames: list) -> list:
+    return [[None if not np.all(np.isfinite(p)) else [round(float(p[0]), 6), round(float(p[1]), 6)] for p in uv]
+            for uv in frames]
+
+
 def render_realistic_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
                            size: Union[str, Sequence[int]] = (640, 480), target: Union[str, Path, Target] = "checkerboard",
                            duration_s: float = 8.0, seed: int = 0, motion_style: str = "handheld", *,
@@ -287,19 +292,22 @@ def render_realistic_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30
                                       exposure_s=exposure_s,
                                       exposure_samples=options.exposure_samples if exposure_s > 0 else None,
                                       workers=workers)
-    frames, uv_rs = [], []
+    frames, uv_rs, uv_rs_mid = [], [], []
     identity = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     try:
         with Progress(progress, len(times), f"rendering {size_wh[0]}x{size_wh[1]} (realistic)") as bar:
             for i, t in enumerate(times):
                 image = sensor_image(renderer.render(float(t)), rng, options, vignette)
                 uv = renderer.project_rs(float(t))
+                uv_mid = renderer.project_rs(float(t), 0.5 * exposure_s)
                 if not np.allclose(warps[i], identity):
                     image = cv2.warpAffine(image, warps[i], size_wh, flags=cv2.INTER_LINEAR,
                                            borderMode=cv2.BORDER_REFLECT)
                     uv = uv @ warps[i][:, :2].T + warps[i][:, 2]
+                    uv_mid = uv_mid @ warps[i][:, :2].T + warps[i][:, 2]
                 frames.append(image)
                 uv_rs.append(uv)
+                uv_rs_mid.append(uv_mid)
                 bar.advance()
     finally:
         renderer.close()
@@ -326,11 +334,10 @@ def render_realistic_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30
         "recorded_times_s": [float(t) for t in recorded],
         "stabilisation_warps": warps.round(9).tolist() if not np.allclose(warps, identity) else None,
         "trajectory": trajectory.describe(),
-        "projections": {"uv_rs": [[None if not np.all(np.isfinite(p)) else [round(float(p[0]), 6),
-                                                                            round(float(p[1]), 6)] for p in uv]
-                                  for uv in uv_rs],
-                        "definition": "exact rolling-shutter projection at the capture time (start of the row's "
-                                      "exposure), after the stabilisation warp; null = not visible"},
+        "projections": {"uv_rs": _uv_lists(uv_rs), "uv_rs_mid_exposure": _uv_lists(uv_rs_mid),
+                        "definition": "uv_rs: exact rolling-shutter projection at the capture time (start of the "
+                                      "row's exposure), after the stabilisation warp; uv_rs_mid_exposure: at the "
+                                      "middle of the exposure (where a blurred corner is found); null = not visible"},
     }
     truth_path = out / "truth.json"
     truth_path.write_text(json.dumps(truth, separators=(",", ":")))

@@ -170,7 +170,8 @@ def test_video_calibration_recovers_the_camera(radtan_video, tmp_path):
     assert result.returncode == 0, result.stderr
     assert "RMS" in result.stdout and "fx" in result.stdout
     summary = json.loads((out / "result.json").read_text())
-    assert summary["views_used"] == 20 and summary["frames_total"] == 48
+    # rolling shutter (issue 12): only frames still enough are used, at least MIN_STILL_VIEWS (12)
+    assert 12 <= summary["views_used"] <= 20 and summary["frames_total"] == 48
     assert summary["views_available"] == summary["frames_detected"] >= 40
     assert summary["timestamps"] == "container"
     p, std = summary["parameters"], summary["std"]
@@ -179,7 +180,7 @@ def test_video_calibration_recovers_the_camera(radtan_video, tmp_path):
     assert abs(p["k1"] + 0.25) < 0.02
     assert summary["rms_px"] < 0.3
     assert all(0 < std[k] < 2.0 for k in ("fx", "fy", "cx", "cy"))
-    assert len(summary["views"]) == 20 and all("time_s" in v and v["rms_px"] < 1 for v in summary["views"])
+    assert len(summary["views"]) == summary["views_used"] and all("time_s" in v and v["rms_px"] < 1 for v in summary["views"])
     camera = load_camera(out / "camera.yaml").camera
     assert camera.model == "pinhole-radtan" and (camera.width, camera.height) == (640, 480)
     np.testing.assert_allclose(camera.params[:4], [p["fx"], p["fy"], p["cx"], p["cy"]])

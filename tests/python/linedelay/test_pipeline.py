@@ -44,7 +44,8 @@ def test_calibrate_video_is_detect_then_the_engine(video, tmp_path):
     assert abs(run.result.line_delay_s - D_S) < 0.03 * D_S
     assert run.fps == pytest.approx(30.0)
     assert run.settings == {"trajectory_model": "spline", "standardise_errors": True, "motion_prior": True,
-                            "adaptive_knots": True}
+                            "adaptive_knots": True, "noise_model": "frame", "readout": "top-down",
+                            "start_s": None, "end_s": None}
 
 
 def test_linear_writes_a_report_through_the_same_writers(video, tmp_path):

@@ -34,7 +34,8 @@ def test_detected_corners_sit_near_the_true_projection(phone):
     truth = json.loads(phone.truth_path.read_text())
     frames = list(open_source(phone.frames_dir).frames(gray=True))
     errors = []
-    for frame, uv in zip(frames, truth["projections"]["uv_rs"]):
+    # a blurred corner is found at the middle of its exposure
+    for frame, uv in zip(frames, truth["projections"]["uv_rs_mid_exposure"]):
         ok, corners = cv2.findChessboardCorners(frame.image, (9, 6))
         if not ok:
             continue
