@@ -12,11 +12,9 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import EXIT_OK, EXIT_UNDETERMINED
+from .common import EXIT_INTERNAL, EXIT_NOT_TRUSTED, EXIT_OK, EXIT_UNDETERMINED
 
 # `rscalib linedelay` exit codes (README: exit codes): 0 trusted, 2 bad input, 3 undetermined, and
-EXIT_NOT_TRUSTED = 4     # estimated, but a check failed (the report says which); results written
-EXIT_INTERNAL = 1        # an unexpected error (one line; RSCALIB_DEBUG=1 shows the traceback)
 EXIT_CODES_HELP = ("exit codes: 0 the line delay is estimated and every check passed (trust it); "
                    "2 bad input (one line on stderr); 3 the video does not determine the line delay (results "
                    "written, no number claimed); 4 estimated but not trusted: a check failed (J/2N, the halves' "
