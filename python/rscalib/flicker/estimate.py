@@ -1,45 +1,24 @@
 """Line delay from the bands of a flickering light (the LED method of Geyer et al. [14] in Oth et al. 2013, §2 and §5).
 
 A light whose intensity repeats at ``frequency_hz`` (f) multiplies row v of frame i by
-g(t_i + v d) (docs/conventions.md: row v of frame i is exposed at t_i + v d), so a rolling-shutter
-image shows horizontal bands of period P = 1 / (f d) rows: d = ν / f with ν = 1 / P cycles/row.
+g(t_i + v d) (docs/conventions.md), so a rolling-shutter image shows horizontal bands of period
+P = 1 / (f |d|) rows: d = ν / f. The model, the two estimators and the checks are in
+docs/formulation.md §12; in short:
 
-Model, on the row profile (mean grey over the columns of a region) in log units:
+  profiles:    column strips (rscalib.flicker.profiles), the region with bands chosen by
+               rscalib.flicker.region, clipped strips as data, log profile clamped at black.
+  spectrum:    each frame its own phase; candidates from periodogram peaks and sub-harmonics,
+               refined with up to 12 harmonics (square-ish waves), the fundamental chosen by
+               nested tests; |d| only; needs >= 3 periods per frame.
+  phase-drift: one phase through the timestamps; both signs of ν; every local minimum of the
+               profile is a candidate (explicit cycle / alias resolution), the best must win by
+               Δχ² >= 25; each frame's own band phase must match the drift.
+  checks:      the estimators agree within 3σ, the residual has no unexplained periodic peak,
+               σ <= 25 % of |d|; else ``determined = False`` with ``reason`` (exit 3).
 
-    y_i(v) = s(v) + c_i + h(2π (f t_i + ν v)) + noise
-
-s(v) is the scene's own row profile, c_i a per-frame brightness (auto exposure), h the periodic
-log-gain written as K harmonics. The nuisances are removed by one linear projection applied to the
-data and to the model alike ("detrend"):
-
-  frames: subtract each row's mean over the frames, then each frame's mean. A static scene cancels
-          exactly; needs the flicker phase to differ between frames. With a moving camera the row
-          means are taken over blocks of MOVING_BLOCK consecutive frames instead; "auto" tries
-          both and keeps the one with the smaller uncertainty.
-  smooth: subtract from each frame a low-order polynomial in v. For one frame, or when the flicker
-          phase is the same in every frame (frame rate and flicker commensurate); assumes the
-          scene has no bands of its own.
-
-Two estimators:
-
-  spectrum:    each frame its own phase (timestamps unused): the summed Hann periodogram
-               (zero-padded) gives ν to a fraction of a bin, refined by least squares of K
-               harmonics at ν in every frame. Needs a few periods per frame.
-  phase-drift: one phase shared by all frames through their timestamps, so the phase drift
-               between frames pins d even when a frame shows less than one period (mains flicker):
-               profile least squares over a grid in ν (the whole range: a spectral peak may be a
-               harmonic), then scipy least_squares on (ν, harmonics). A second minimum of the grid
-               almost as good means aliasing. Preferred by "auto" when the frames have timestamps;
-               the spectrum is kept as a cross-check (a disagreement suggests inexact timestamps).
-
-Clipped pixels do not follow the light: columns are averaged in strips, and a strip that clips in
-any frame is left out of that row in every frame.
-
-Weights: var(log p) ~ σ² / p², so row v weighs median_i(p_i(v))²; rows darker than 1 % of the
-brightest row or saturated are left out. Uncertainty: the fit (Jacobian or profile curvature,
-scaled by the residual variance) and the spread over frames or frame subsets; the reported
-``line_delay_std_s`` is the larger. A result that the data do not determine (no band contrast,
-aliasing, std > 25 % of d) has ``determined = False`` and says why in ``warnings``.
+Uncertainty: the fit's (curvature or Jacobian, scaled by the residual variance, inflated for
+residual power near the band harmonics, for residual common to all frames, and by the χ² of row
+segments) and the spread over frames or frame blocks; ``line_delay_std_s`` is the larger.
 """
 from __future__ import annotations
 
@@ -57,7 +36,10 @@ from .region import choose_region
 
 __all__ = ["FlickerResult", "estimate_line_delay_flicker"]
 
-SPECTRUM_MIN_CYCLES = 2.0        # below this many periods per frame the periodogram peak is leakage
+SPECTRUM_MIN_CYCLES = 2.0        # below this many periods per frame the bands cannot be told from scene shading
+MAX_AMPLITUDE_SPREAD = 0.5       # spectrum: relative spread of the frames' band amplitudes
+SQUARE_MIN_CYCLES = 3.0          # the spectrum alone needs this many: fewer periods of a many-harmonic
+                                 # waveform can fit a step or two of a slower light (a harmonic lock)
 MIN_DELTA_CHI2 = 100.0           # plus 4 per fitted amplitude: noise alone gives ~1 per amplitude + ~10 for the search
 MIN_PEAK_RATIO = 10.0            # periodogram peak over its median in the search band
 AMBIGUITY_DELTA_CHI2 = 25.0      # a second minimum this close: d is aliased
@@ -264,6 +246,34 @@ def _fundamental(data: _Data, nu: float, k_count: int, rss: float, dof: int) -> 
     return nu, steps
 
 
+def _segment_chi2(data: _Data, nu: float, k_count: int) -> float:
+    """χ² per degree of freedom of ν fitted in separate segments of rows (4, or 2 when fewer than
+    ~2 periods would fit a quarter) about their weighted mean; nan when the segments are too short."""
+    used = np.flatnonzero(data.sw > 0)
+    span = float(np.ptp(data.v)) + 1.0
+    pieces = 4 if nu * span / 4 >= 2.0 else 2
+    if nu * span / pieces < 2.0 or len(used) < pieces * MIN_ROWS:
+        return float("nan")
+    values, variances = [], []
+    for rows in np.array_split(used, pieces):
+        index = np.arange(rows[0], rows[-1] + 1)
+        part = _Data(data.y[:, index], data.sw[index], data.v[index], data.phase0, data.detrend, data.poly_degree,
+                     data.block)
+        part_span = float(np.ptp(part.v)) + 1.0
+        nu_p, rss_p = _refine_frames(part, nu, k_count, 0.3 / part_span, 0.5 * nu)
+        dof = max(1, part.frames * part.rows_used - part.nuisance_dof() - part.frames * 2 * k_count - 1)
+        h = 0.01 / (part_span * k_count)
+        curv = (float(np.sum(_frame_rss(part, nu_p + h, k_count))) - 2 * rss_p
+                + float(np.sum(_frame_rss(part, nu_p - h, k_count)))) / h ** 2
+        if not curv > 0:
+            return float("nan")
+        values.append(nu_p)
+        variances.append(2.0 * rss_p / dof / curv)
+    values, weights = np.array(values), 1.0 / np.array(variances)
+    mean = float(np.sum(weights * values) / np.sum(weights))
+    return float(np.sum(weights * (values - mean) ** 2) / (len(values) - 1))
+
+
 def _spectrum_estimate(data: _Data, nu_hi: float, kmax: int, min_cycles: float) -> dict:
     """ν with each frame its own phase: periodogram peaks and their sub-harmonics as candidates,
     each refined by least squares with the harmonics of a square-ish wave, the best kept, and then
@@ -340,15 +350,21 @@ def _spectrum_estimate(data: _Data, nu_hi: float, kmax: int, min_cycles: float) 
         std_spread = float(1.4826 * mad / math.sqrt(len(finite))) if mad > 0 else float("nan")
     elif len(finite) == 2:
         std_spread = float(abs(finite[1] - finite[0]) / 2.0)
+    # consistency of row segments: ν from each segment of rows against their own σ (a waveform that
+    # changes along the frame, vignetting with clipping, makes the white-noise σ too small)
+    segment_chi2 = _segment_chi2(data, nu, k_count)
+    if segment_chi2 > 1.0 and math.isfinite(std_fit):
+        std_fit *= math.sqrt(segment_chi2)
     delta_chi2 = (data.null_rss() - rss) / sigma2
     penalty = math.log(max(n_eff, 2)) * data.frames * 2 * k_count
     # Are these bands a harmonic of bands with fewer periods than the spectrum searches? Then ν/m
     # with m times the harmonics explains much more (a true fundamental carries more than scene
     # residue fitted by the extra terms).
-    for m in (2, 3):
-        if not 0.3 <= nu / m * span < min_cycles:
-            continue
-        k_sub = min(m * k_count, _harmonics_at(nu / m, m * kmax))
+    cycles = nu * span
+    tried = sorted({m for m in (2, 3, *np.unique(np.ceil(cycles / np.array([1.9, 1.3, 0.9, 0.6, 0.4])).astype(int)))
+                    if m >= 2 and 0.3 <= cycles / m < min_cycles})
+    for m in tried:
+        k_sub = min(m * k_count, _harmonics_at(nu / m, m * kmax), 2 * kmax)
         if k_sub <= k_count:
             continue
         sub = minimize_scalar(lambda x, k_sub=k_sub: float(np.sum(_frame_rss(data, x, k_sub))),
@@ -361,10 +377,24 @@ def _spectrum_estimate(data: _Data, nu_hi: float, kmax: int, min_cycles: float) 
             return out
     out.update(ok=True, nu=nu, std_fit_nu=std_fit, std_spread_nu=std_spread, per_frame_nu=per_frame_nu,
                spread_label="frame", delta_chi2=float(delta_chi2), peak_ratio=ratio, harmonics=k_count,
-               rss=rss, sigma2=sigma2, candidates_nu=[c[0] for c in candidates], fundamental_tests=steps)
-    if nu * span < min_cycles:
-        out.update(ok=False, reason=f"{nu * span:.2f} periods per frame: too few for the spectrum "
-                                    f"(needs {min_cycles:g})")
+               rss=rss, sigma2=sigma2, candidates_nu=[c[0] for c in candidates], fundamental_tests=steps,
+               segment_chi2=segment_chi2)
+    # the same light in every frame: the bands' fundamental amplitude may not vary much between frames
+    # (a lock on a harmonic of a slower light sees an edge in some frames and none in others)
+    amplitude_spread = float("nan")
+    if data.frames >= 3:
+        design = _frame_design(data, nu, 1)
+        free, *_ = np.linalg.lstsq(design, data.yp.T, rcond=None)
+        amplitude = np.hypot(free[0], free[1])
+        amplitude_spread = float(np.std(amplitude) / max(np.mean(amplitude), 1e-300))
+        out["amplitude_spread"] = amplitude_spread
+    if nu * span < SQUARE_MIN_CYCLES:
+        out.update(ok=False, reason=f"{nu * span:.2f} periods per frame: too few for the spectrum alone "
+                                    f"(needs {SQUARE_MIN_CYCLES:g} to tell a band period from a harmonic of a "
+                                    "slower light)")
+    elif amplitude_spread > MAX_AMPLITUDE_SPREAD:
+        out.update(ok=False, reason=f"the bands' amplitude varies by {amplitude_spread:.0%} between frames: not "
+                                    "the same periodic light in every frame (a harmonic of a slower light?)")
     elif ratio < MIN_PEAK_RATIO or delta_chi2 < MIN_DELTA_CHI2 + penalty:
         out.update(ok=False, reason=f"no flicker bands found (spectral peak {ratio:.1f}x the median, "
                                     f"delta chi2 {delta_chi2:.0f} for {data.frames * 2 * k_count} amplitudes)")
@@ -753,8 +783,7 @@ def estimate_line_delay_flicker(frames: Any, frequency_hz: float, timestamps_s: 
     last = None
     for mode, block in attempts:
         data = _Data(y, sw, v, phase0, mode, poly_degree, block)
-        min_cycles = 1.0 if mode == "frames" and block is None else SPECTRUM_MIN_CYCLES
-        spec = _spectrum_estimate(data, nu_hi, kmax, min_cycles) if method in ("auto", "spectrum") else None
+        spec = _spectrum_estimate(data, nu_hi, kmax, SPECTRUM_MIN_CYCLES) if method in ("auto", "spectrum") else None
         drift = None
         if method in ("auto", "phase-drift") and phase0 is not None and nu_hi > 0.1 / span_rows:
             drift = _phase_drift_estimate(data, 0.1 / span_rows, nu_hi, kmax, sign)
@@ -783,7 +812,8 @@ def estimate_line_delay_flicker(frames: Any, frequency_hz: float, timestamps_s: 
             entry["reason"] = e["reason"]
         if "alias_nu" in e:
             entry["alias_line_delay_s"] = e["alias_nu"] / f
-        for key in ("ambiguity_delta_chi2", "distinct_phases", "joint_vs_free_f", "phase_rms_cycles", "peak_ratio"):
+        for key in ("ambiguity_delta_chi2", "distinct_phases", "joint_vs_free_f", "phase_rms_cycles", "peak_ratio",
+                    "segment_chi2", "amplitude_spread"):
             if e.get(key) is not None:
                 entry[key] = e[key]
         for key in ("candidates_nu",):

@@ -10,6 +10,8 @@ A region given by the user (``roi``) overrides the choice of strips; unlit cells
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from scipy.ndimage import binary_dilation, maximum_filter1d, median_filter
 
@@ -100,7 +102,9 @@ def choose_region(profiles: RowProfiles, auto: bool = True) -> dict:
     gains = np.ones(count)
     mean_y = y.mean(axis=0)                                          # (rows, S)
     if keep.sum() >= 2:
-        ref = np.nanmedian(np.where(use, mean_y, np.nan), axis=1)    # (rows,)
+        with warnings.catch_warnings():  # rows without a used cell: NaN, expected
+            warnings.simplefilter("ignore", RuntimeWarning)
+            ref = np.nanmedian(np.where(use, mean_y, np.nan), axis=1)    # (rows,)
         diff = mean_y - ref[:, None]
         for s in np.flatnonzero(keep):
             cells = use[:, s] & np.isfinite(ref)
