@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import EXIT_OK, EXIT_UNDETERMINED
+from .common import CAPTURE_GUIDE, EXIT_OK, EXIT_UNDETERMINED
 
 
 def add_parser(sub) -> None:
@@ -90,4 +90,6 @@ def run(args: argparse.Namespace) -> int:
     for w in result.warnings:
         print(f"warning: {w}", file=sys.stderr)
     print(f"results: {out / 'result.json'}")
+    if not result.determined:
+        print(f"how to film flicker bands: {CAPTURE_GUIDE}")
     return EXIT_OK if result.determined else EXIT_UNDETERMINED

@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import EXIT_INTERNAL, EXIT_NOT_TRUSTED, EXIT_OK, EXIT_UNDETERMINED
+from .common import CAPTURE_GUIDE, EXIT_INTERNAL, EXIT_NOT_TRUSTED, EXIT_OK, EXIT_UNDETERMINED
 
 # `rscalib linedelay` exit codes (README: exit codes): 0 trusted, 2 bad input, 3 undetermined, and
 EXIT_CODES_HELP = ("exit codes: 0 the line delay is estimated and every check passed (trust it); "
@@ -166,7 +166,7 @@ def run_linedelay(args) -> int:
 
 def _run_linedelay(args) -> int:
     from ..linedelay.pipeline import calibrate_video
-    from ..linedelay.report import NOT_TRUSTED, UNDETERMINED, write_video_outputs
+    from ..linedelay.report import NOT_TRUSTED, TRUSTED, UNDETERMINED, write_video_outputs
 
     _check_flags(args)
     solving = ("estimating per-frame poses and line delay (linear interpolation):" if args.trajectory == "linear"
@@ -195,6 +195,8 @@ def _run_linedelay(args) -> int:
     for advice in (summary.get("guidance") or {}).get("advice", []):
         print(f"  to film better: {advice}")
     _print_warnings(summary)
+    if status != TRUSTED:
+        print(f"  how to film a better video: {CAPTURE_GUIDE}")
     print(f"report: {Path(args.out) / 'report.html'}")
     if status == UNDETERMINED:
         return EXIT_UNDETERMINED

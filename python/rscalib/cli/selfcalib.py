@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import EXIT_OK, EXIT_UNDETERMINED
+from .common import CAPTURE_GUIDE, EXIT_OK, EXIT_UNDETERMINED
 
 
 def add_parser(sub) -> None:
@@ -102,4 +102,6 @@ def run(args: argparse.Namespace) -> int:
               f"cx [{b[1, 0]:.1f}, {b[1, 1]:.1f}], cy [{b[2, 0]:.1f}, {b[2, 1]:.1f}]", file=sys.stderr)
     for w in result.warnings:
         print(f"warning: {w}", file=sys.stderr)
+    if not result.determined:
+        print(f"how to record a self-calibration walk: {CAPTURE_GUIDE}")
     return EXIT_OK if result.determined else EXIT_UNDETERMINED

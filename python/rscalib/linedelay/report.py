@@ -453,7 +453,7 @@ table{{border-collapse:collapse}}th,td{{padding:3px 10px;border-bottom:1px solid
 .verdict{{border-left:6px solid {color};padding:0.5em 1em;background:#f6f6f6}}
 figure{{margin:1.5em 0}}img{{max-width:100%}}figcaption{{color:#555;font-size:90%}}</style></head><body>
 <h1>{html.escape(title)}</h1>
-<div class="verdict"><strong>{html.escape(v.headline)}</strong>{'<ul>' + reasons + '</ul>' if reasons else ''}</div>
+<div class="verdict"><strong>{html.escape(v.headline)}</strong>{'<ul>' + reasons + '</ul>' if reasons else ''}{'' if v.trust else '<p>How to film a better calibration video: docs/capture.md in the rscalib repository.</p>'}</div>
 <h2>Result</h2><table>{table}</table>
 {check_html}
 {guidance_html}
