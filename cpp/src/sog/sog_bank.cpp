@@ -211,18 +211,21 @@ SogUpdateReport SogBank::Update(const std::vector<int64_t>& ids,
   SogUpdateReport report;
   report.used.assign(rows, false);
   report.gate_chi2.assign(rows, std::numeric_limits<double>::quiet_NaN());
+  // Row r's match inside the 99 % gate of its merged prediction? Records its chi2 either way.
+  const auto passes_gate = [&](size_t r) {
+    Eigen::Vector2d mean;
+    Eigen::Matrix2d cov;
+    if (!MergePrediction(indices[r], &mean, &cov)) return false;
+    const Eigen::Vector2d d = uv[r] - mean;
+    report.gate_chi2[r] = d.dot(cov.ldlt().solve(d));
+    return !(options_.gate_chi2 > 0.0 && !(report.gate_chi2[r] <= options_.gate_chi2));
+  };
   // Gate every match against the merged prediction (99 %).
   std::vector<int> gated_rows;
   for (size_t r = 0; r < rows; ++r) {
     map_[indices[r]].times_predicted += 1;
     if (!matched[r] || !uv[r].allFinite()) continue;
-    Eigen::Vector2d mean;
-    Eigen::Matrix2d cov;
-    if (!MergePrediction(indices[r], &mean, &cov)) continue;
-    const Eigen::Vector2d d = uv[r] - mean;
-    report.gate_chi2[r] = d.dot(cov.ldlt().solve(d));
-    if (options_.gate_chi2 > 0.0 && !(report.gate_chi2[r] <= options_.gate_chi2)) continue;
-    gated_rows.push_back(static_cast<int>(r));
+    if (passes_gate(r)) gated_rows.push_back(static_cast<int>(r));
   }
   // 1-point RANSAC (optional): the low-innovation inliers first, then the rest re-gated.
   std::vector<int> first_rows = gated_rows, rest_rows;
@@ -253,15 +256,8 @@ SogUpdateReport SogBank::Update(const std::vector<int64_t>& ids,
     for (int r : rest_rows) rest_indices.push_back(indices[r]);
     EnsurePredictions(rest_indices);
     std::vector<int> rescued;
-    for (int r : rest_rows) {
-      Eigen::Vector2d mean;
-      Eigen::Matrix2d cov;
-      if (!MergePrediction(indices[r], &mean, &cov)) continue;
-      const Eigen::Vector2d d = uv[r] - mean;
-      report.gate_chi2[r] = d.dot(cov.ldlt().solve(d));
-      if (options_.gate_chi2 > 0.0 && !(report.gate_chi2[r] <= options_.gate_chi2)) continue;
-      rescued.push_back(r);
-    }
+    for (int r : rest_rows)
+      if (passes_gate(r)) rescued.push_back(r);
     if (!rescued.empty()) {
       Eigen::VectorXd ll2 = Eigen::VectorXd::Zero(n_filters),
                       nis2 = Eigen::VectorXd::Zero(n_filters);

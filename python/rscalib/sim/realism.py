@@ -46,7 +46,7 @@ from ..io.targets import Target, as_target
 from .target_observations import default_camera
 from .target_texture import BLACK, WHITE, TargetTexture
 from .target_video import RollingShutterRenderer
-from .trajectories import HandheldTrajectory, TargetFlippedTrajectory, standoff_distance_m
+from .trajectories import target_trajectory
 
 __all__ = ["MOTION_STYLES", "RealismOptions", "RealisticVideo", "ScreenTexture", "motion_trajectory",
            "render_realistic_video"]
@@ -111,14 +111,7 @@ def motion_trajectory(camera: CameraModel, target: Target, duration_s: float, se
     if style not in MOTION_STYLES:
         raise InputError(f"unknown motion style {style!r} ({', '.join(MOTION_STYLES)})")
     freq, amplitude = MOTION_STYLES[style]
-    centre = target.center_m()
-    distance = standoff_distance_m(camera, target.points_m)
-    if target.target_type == "aprilgrid":
-        return TargetFlippedTrajectory(HandheldTrajectory(
-            duration_s=duration_s, seed=seed, amplitude=amplitude, freq_range_hz=freq,
-            target_center_m=centre * np.array([1.0, -1.0, 1.0]), distance_m=distance))
-    return HandheldTrajectory(duration_s=duration_s, seed=seed, amplitude=amplitude, freq_range_hz=freq,
-                              target_center_m=centre, distance_m=distance)
+    return target_trajectory(camera, target, duration_s, seed, motion=amplitude, freq_range_hz=freq)
 
 
 @dataclass

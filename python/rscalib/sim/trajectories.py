@@ -306,20 +306,21 @@ class TargetFlippedTrajectory(CameraMotion):
 
 
 def target_trajectory(camera: Any, target: Target, duration_s: float, seed: int = 0, motion: float = 1.0,
-                      amplitude_profile: Optional[Callable[[np.ndarray], np.ndarray]] = None) -> CameraMotion:
+                      amplitude_profile: Optional[Callable[[np.ndarray], np.ndarray]] = None,
+                      **handheld_options: Any) -> CameraMotion:
     """The hand-held trajectory of a target video: :class:`HandheldTrajectory` looking at the target
     centre from the stand-off at which the target fills about half the image (``camera``: anything
     with ``params`` [fx, fy, ...], ``width``, ``height``); ``motion`` scales its amplitude (0 = static
-    camera). For an AprilGrid (Kalibr's frame, printed side towards +z) it is seen through
-    :class:`TargetFlippedTrajectory`."""
+    camera); ``handheld_options`` go to HandheldTrajectory (e.g. ``freq_range_hz``). For an AprilGrid
+    (Kalibr's frame, printed side towards +z) it is seen through :class:`TargetFlippedTrajectory`."""
     center = target.center_m()
     distance = standoff_distance_m(camera, target.points_m)
     if target.target_type == "aprilgrid":
         return TargetFlippedTrajectory(HandheldTrajectory(
             duration_s=duration_s, seed=seed, amplitude=motion, amplitude_profile=amplitude_profile,
-            target_center_m=center * np.array([1.0, -1.0, 1.0]), distance_m=distance))
+            target_center_m=center * np.array([1.0, -1.0, 1.0]), distance_m=distance, **handheld_options))
     return HandheldTrajectory(duration_s=duration_s, seed=seed, amplitude=motion, amplitude_profile=amplitude_profile,
-                              target_center_m=center, distance_m=distance)
+                              target_center_m=center, distance_m=distance, **handheld_options)
 
 
 def trajectory_from_description(description: dict) -> CameraMotion:
