@@ -25,28 +25,21 @@ from ..observations import Observations
 READOUTS = ("top-down", "bottom-up", "left-right", "right-left")
 
 
-def _flip_v(obs: Observations, camera: CameraModel) -> tuple[Observations, CameraModel]:
-    w, h = obs.image_size
+def _mirror(obs: Observations, camera: CameraModel, axis: int) -> tuple[Observations, CameraModel]:
+    """Mirror the image along u (axis 0) or v (axis 1): pixels, the target's matching axis, the
+    principal point and, for pinhole-radtan, the tangential term of that axis (p2 for u, p1 for v)."""
+    size = obs.image_size
     uv = obs.uv.copy()
-    uv[:, 1] = (h - 1) - uv[:, 1]
-    pts = obs.target_points * np.array([1.0, -1.0, 1.0])
+    uv[:, axis] = (size[axis] - 1) - uv[:, axis]
+    sign = np.ones(3)
+    sign[axis] = -1.0
+    pts = obs.target_points * sign
     p = list(camera.params)
-    p[3] = (h - 1) - p[3]
-    if camera.model == "pinhole-radtan" and len(p) > 6:
-        p[6] = -p[6]
-    return _with(obs, uv, pts, (w, h)), CameraModel(camera.model, p, camera.width, camera.height)
-
-
-def _flip_u(obs: Observations, camera: CameraModel) -> tuple[Observations, CameraModel]:
-    w, h = obs.image_size
-    uv = obs.uv.copy()
-    uv[:, 0] = (w - 1) - uv[:, 0]
-    pts = obs.target_points * np.array([-1.0, 1.0, 1.0])
-    p = list(camera.params)
-    p[2] = (w - 1) - p[2]
-    if camera.model == "pinhole-radtan" and len(p) > 7:
-        p[7] = -p[7]
-    return _with(obs, uv, pts, (w, h)), CameraModel(camera.model, p, camera.width, camera.height)
+    p[2 + axis] = (size[axis] - 1) - p[2 + axis]
+    tangential = 7 - axis
+    if camera.model == "pinhole-radtan" and len(p) > tangential:
+        p[tangential] = -p[tangential]
+    return _with(obs, uv, pts, tuple(size)), CameraModel(camera.model, p, camera.width, camera.height)
 
 
 def _transpose(obs: Observations, camera: CameraModel) -> tuple[Observations, CameraModel]:
@@ -75,10 +68,10 @@ def to_top_down(observations: Observations, camera: CameraModel, readout: str
     if camera.model not in ("pinhole-radtan", "pinhole-equidistant"):
         raise InputError(f"--readout {readout} needs a pinhole-radtan or pinhole-equidistant camera")
     if readout == "bottom-up":
-        return _flip_v(observations, camera)
+        return _mirror(observations, camera, axis=1)
     if readout == "left-right":
         return _transpose(observations, camera)
-    return _transpose(*_flip_u(observations, camera))
+    return _transpose(*_mirror(observations, camera, axis=0))
 
 
 def time_window(observations: Observations, start_s: Optional[float], end_s: Optional[float]) -> Observations:
