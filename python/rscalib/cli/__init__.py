@@ -10,11 +10,11 @@ import sys
 
 from .._version import __version__
 from ..errors import InputError
-from . import demo, flicker, intrinsics, linedelay, selfcalib, simulate
+from . import batch, demo, flicker, intrinsics, linedelay, selfcalib, simulate
 from .common import EXIT_BAD_INPUT, EXIT_OK, EXIT_UNDETERMINED  # noqa: F401  (re-exported)
 
 # One module per subcommand: add_parser(sub) and run(args); each imports its engine only when run.
-COMMAND_MODULES = [demo, flicker, intrinsics, linedelay, selfcalib, simulate]
+COMMAND_MODULES = [batch, demo, flicker, intrinsics, linedelay, selfcalib, simulate]
 
 
 class _Parser(argparse.ArgumentParser):

@@ -1,0 +1,200 @@
+"""The batch manifest: one job per row (CSV) or per entry (YAML), read into the argv of a single command.
+
+A row has `command` (linedelay, intrinsics, flicker, selfcalib), `input` (the command's video, image folder
+or, for intrinsics, several separated by ';'), optional `id` (default: command and input path), optional
+`mode` (the camera mode the summary groups by), optional `args` (raw extra flags) and any option of the
+command by its flag name (`target`, `camera`, `frequency`, `pixel-size-mm`...). Relative paths are
+relative to the manifest's folder. YAML may give `defaults:` shared by every job of `jobs:`.
+
+Every row is checked with the command's own parser before anything runs, so a typo is one line
+(exit 2) naming the file, row and field, not a failed job an hour later.
+"""
+from __future__ import annotations
+
+import contextlib
+import csv
+import hashlib
+import io
+import json
+import re
+import shlex
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import InputError
+
+# command -> its options that name input files (hashed and resolved like `input`)
+INPUT_OPTIONS = {"linedelay": ("target", "camera"), "intrinsics": ("target",), "flicker": (), "selfcalib": ()}
+COMMANDS = tuple(INPUT_OPTIONS)
+PATH_OPTIONS = ("target", "camera", "cache-dir")    # resolved against the manifest's folder
+RESERVED = ("out", "quiet")                         # the batch sets these
+META_FIELDS = ("id", "command", "input", "mode", "args")
+# Commands whose detection starts a process per core unless told: in a batch the jobs are the parallelism.
+DETECTION_COMMANDS = ("linedelay", "intrinsics")
+_ID_CHARS = re.compile(r"[^A-Za-z0-9._-]+")
+
+
+@dataclass(frozen=True)
+class Job:
+    """One row: the single command `rscalib <argv> --out <folder>` and what identifies it."""
+
+    id: str
+    row: int                 # 1-based, in manifest order
+    command: str
+    mode: str                # camera mode for the summary ("" when not given)
+    inputs: tuple            # absolute paths of every input file or folder (input, target, camera)
+    argv: tuple              # the single command's arguments without --out (ends with --quiet)
+
+    def command_argv(self, out_dir) -> list:
+        return [*self.argv, "--out", str(out_dir)]
+
+    def spec_hash(self, version: str) -> str:
+        """What the job is, without the inputs' contents: command, arguments (absolute paths), version."""
+        text = json.dumps({"argv": list(self.argv), "version": version}, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+
+def load_manifest(path) -> list:
+    """Jobs of a CSV or YAML manifest; InputError naming the file, row and field on any problem."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"manifest not found: {path}")
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        rows = _csv_rows(path)
+    elif suffix in (".yaml", ".yml"):
+        rows = _yaml_rows(path)
+    else:
+        raise InputError(f"{path}: a manifest is a .csv or .yaml file")
+    if not rows:
+        raise InputError(f"{path}: no jobs")
+    jobs, seen = [], {}
+    for number, (where, fields) in enumerate(rows, start=1):
+        job = _job(path, number, where, fields)
+        if job.id in seen:
+            raise InputError(f"{path}: {where}: field 'id': '{job.id}' is also the id of row {seen[job.id]}"
+                             + ("" if "id" in fields else " (give each row an id)"))
+        seen[job.id] = number
+        jobs.append(job)
+    return jobs
+
+
+def _csv_rows(path: Path) -> list:
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        if not reader.fieldnames or "command" not in [n.strip() for n in reader.fieldnames]:
+            raise InputError(f"{path}: line 1: the header needs a 'command' column (and 'input')")
+        rows = []
+        for record in reader:
+            if None in record:
+                raise InputError(f"{path}: line {reader.line_num}: more cells than header columns")
+            fields = {k.strip(): (v or "").strip() for k, v in record.items()}
+            if any(fields.values()):
+                rows.append((f"row {len(rows) + 1} (line {reader.line_num})", fields))
+        return rows
+
+
+def _yaml_rows(path: Path) -> list:
+    import yaml
+
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as error:
+        raise InputError(f"{path}: not valid YAML: {str(error).splitlines()[0]}") from None
+    defaults = {}
+    if isinstance(data, dict):
+        defaults = data.get("defaults") or {}
+        data = data.get("jobs")
+        if not isinstance(defaults, dict):
+            raise InputError(f"{path}: field 'defaults': a mapping of fields shared by every job")
+    if not isinstance(data, list):
+        raise InputError(f"{path}: a list of jobs, or a mapping with 'jobs:' (and optional 'defaults:')")
+    rows = []
+    for number, entry in enumerate(data, start=1):
+        if not isinstance(entry, dict):
+            raise InputError(f"{path}: row {number}: a job is a mapping of fields (command, input, ...)")
+        rows.append((f"row {number}", {**defaults, **{str(k): v for k, v in entry.items()}}))
+    return rows
+
+
+def _is_blank(value) -> bool:
+    return value is None or (isinstance(value, str) and not value.strip())
+
+
+def _resolve(base: Path, value) -> str:
+    return str((base / Path(str(value)).expanduser()).resolve())
+
+
+def _option_args(flag: str, value, is_path: bool, base: Path) -> list:
+    """One manifest field -> its command-line words. true/false are flags; lists are several values."""
+    if isinstance(value, bool) or (isinstance(value, str) and value.strip().lower() in ("true", "false")):
+        return [flag] if value is True or str(value).strip().lower() == "true" else []
+    if isinstance(value, (list, tuple)):
+        return [flag, *(str(v) for v in value)]
+    if is_path:
+        return [flag, _resolve(base, value)]
+    if isinstance(value, str):
+        return [flag, *shlex.split(value)]
+    return [flag, str(value)]
+
+
+def _job(path: Path, number: int, where: str, fields: dict) -> Job:
+    base = path.parent
+
+    def bad(field: str, message: str) -> InputError:
+        return InputError(f"{path}: {where}: field '{field}': {message}")
+
+    fields = {k.strip().lstrip("-").replace("_", "-"): v for k, v in fields.items() if k is not None}
+    command = str(fields.get("command") or "").strip()
+    if command not in INPUT_OPTIONS:
+        raise bad("command", f"'{command}' is not one of {', '.join(COMMANDS)}" if command else "missing")
+    raw_input = fields.get("input")
+    if _is_blank(raw_input):
+        raise bad("input", "missing (the video, image folder or stills of this job)")
+    items = raw_input if isinstance(raw_input, list) else str(raw_input).split(";")
+    inputs = [_resolve(base, item.strip() if isinstance(item, str) else item) for item in items
+              if not _is_blank(item)]
+    if len(inputs) > 1 and command != "intrinsics":
+        raise bad("input", f"{command} takes one video or image folder (got {len(inputs)})")
+    argv = [command, *inputs]
+    input_paths = list(inputs)
+    for name, value in fields.items():
+        if name in META_FIELDS or _is_blank(value):
+            continue
+        if name in RESERVED:
+            raise bad(name, "is set by the batch (each job writes to DIR/jobs/<id>/)")
+        words = _option_args(f"--{name}", value, name in PATH_OPTIONS, base)
+        argv += words
+        if name in INPUT_OPTIONS[command] and len(words) == 2:
+            input_paths.append(words[1])
+    if not _is_blank(fields.get("args")):
+        argv += shlex.split(str(fields["args"]))
+    if command in DETECTION_COMMANDS and "--workers" not in argv:
+        argv += ["--workers", "1"]
+    argv.append("--quiet")
+    _check_with_parser(argv, bad)
+    job_id = str(fields.get("id") or "").strip()
+    if job_id:
+        if _ID_CHARS.search(job_id) or job_id.startswith("."):
+            raise bad("id", f"'{job_id}' must be letters, digits, '.', '_' or '-' (it names a folder)")
+    else:
+        stem = "-".join(Path(p).with_suffix("").name for p in inputs[:1])
+        parent = Path(inputs[0]).parent.name if inputs else ""
+        job_id = _ID_CHARS.sub("_", f"{command}-{parent}-{stem}" if parent else f"{command}-{stem}")
+    mode = "" if _is_blank(fields.get("mode")) else str(fields["mode"]).strip()
+    return Job(job_id, number, command, mode, tuple(input_paths), tuple(argv))
+
+
+def _check_with_parser(argv: list, bad) -> None:
+    """Parse the row with the command's own parser; its complaint becomes one line naming the field."""
+    from ..cli import build_parser
+
+    messages = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(messages), contextlib.redirect_stdout(io.StringIO()):
+            build_parser().parse_args([*argv, "--out", "."])
+    except SystemExit:
+        text = messages.getvalue().strip().splitlines()
+        message = text[-1].split("error: ", 1)[-1] if text else "not accepted by the command"
+        flag = re.search(r"--([A-Za-z0-9-]+)", message)  # the option argparse names, if any
+        raise bad(flag.group(1) if flag else "input", message) from None
