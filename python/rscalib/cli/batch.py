@@ -75,11 +75,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--workers and --threads-per-worker must be at least 1")
     if args.job_timeout is not None and not args.job_timeout > 0:
         raise InputError("--job-timeout must be positive")
-    from ..batch.runner import require_dask, run_batch
+    from ..batch.runner import run_batch
     from ..batch.store import ANSWERED, STORE_FILE, ResultStore
     from ..batch.summary import summary_line, write_index
 
-    require_dask()
     counts = run_batch(args.manifest, args.out, resume=args.resume, workers=args.workers,
                        threads_per_worker=args.threads_per_worker, memory_limit=_memory_limit(args.memory_limit),
                        scheduler=args.scheduler, timeout_s=args.job_timeout,
