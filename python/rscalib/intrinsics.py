@@ -4,7 +4,8 @@
 most varied `max_views`), runs cv2.calibrateCameraExtended (pinhole-radtan) or
 cv2.fisheye.calibrate (pinhole-equidistant), and reports the RMS, per-view errors and the
 standard deviations of the parameters. `write_intrinsics` writes camera.yaml (OpenCV
-FileStorage) and result.json.
+FileStorage), the same camera for Kalibr, Gyroflow, ROS, mrcal and COLMAP, the detections as
+mrcal's corners.vnl, and result.json.
 """
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ from ._core import CameraModel
 from .detection.detectors import DETECTOR_VERSION
 from .detection.result import DetectionResult
 from .errors import InputError
-from .io.cameras import camera_from_opencv, opencv_matrices, write_opencv_yaml
+from .io.camera_formats.mrcal import write_corners_vnl
+from .io.cameras import camera_from_opencv, opencv_matrices, write_camera_set, write_opencv_yaml
 from .io.results import write_result_json
 
 MODELS = ("pinhole-radtan", "pinhole-equidistant")
@@ -358,9 +360,13 @@ def _dropped_text(dropped: dict) -> str:
 
 
 def write_intrinsics(result: IntrinsicsResult, out_dir, detections: Optional[DetectionResult] = None,
-                     extra: Optional[dict] = None) -> tuple[Path, Path]:
-    """Write out_dir/camera.yaml (OpenCV FileStorage, camera_io.write_opencv_yaml) and
-    out_dir/result.json. Returns both paths."""
+                     extra: Optional[dict] = None, inputs: Optional[dict] = None,
+                     gyroflow: Optional[dict] = None) -> tuple[Path, Path]:
+    """Write out_dir/camera.yaml (OpenCV FileStorage), the camera files for other tools
+    (io.cameras.write_camera_set: Kalibr, Gyroflow, ROS, mrcal, COLMAP), the detections as mrcal's
+    corners.vnl (when given, on a grid target) and out_dir/result.json. inputs: the provenance's
+    input files ({"images": [...], "target": path}); gyroflow: camera_brand, camera_model, lens_model
+    of the Gyroflow profile. Returns the paths of camera.yaml and result.json."""
     from ._version import __version__
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -372,6 +378,26 @@ def write_intrinsics(result: IntrinsicsResult, out_dir, detections: Optional[Det
     camera_path, json_path = out / "camera.yaml", out / "result.json"
     write_opencv_yaml(result.camera, camera_path, extra={"avg_reprojection_error": float(result.rms_px)})
     summary = {"rscalib_version": __version__, "detector_version": DETECTOR_VERSION, **result.to_dict()}
+    fps = 0.0
+    if detections is not None and detections.timestamps != "frame index" and \
+            detections.observations.num_frames > 1:
+        fps = float(1.0 / np.median(np.diff(detections.observations.frame_times_s)))
+    exports = write_camera_set(result.camera, out, None, fps=fps, rms_px=result.rms_px, opencv_name=None,
+                               num_images=len(result.view_index), gyroflow=gyroflow)
+    files = {"opencv_yaml": camera_path.name} | exports.files
+    notes = list(exports.notes)
+    if detections is not None:
+        obs = detections.observations
+        try:
+            write_corners_vnl(out / "corners.vnl", [str(label) for label in detections.frame_labels],
+                              obs.frame_index, obs.point_id, obs.uv, obs.target_points)
+            files["mrcal_corners"] = "corners.vnl"
+        except InputError as error:
+            notes.append(f"no corners.vnl: {error}")
+    if exports.details:
+        summary["exports"] = exports.details
+    summary["export_notes"] = notes
+    summary["files"] = files
     if detections is not None:
         times = detections.observations.frame_times_s
         for view, index in zip(summary["views"], result.view_index):
@@ -385,5 +411,7 @@ def write_intrinsics(result: IntrinsicsResult, out_dir, detections: Optional[Det
         })
         summary["warnings"] = list(detections.warnings) + summary["warnings"]
     summary.update(extra or {})
-    write_result_json(out, summary, command="intrinsics", inputs=(extra or {}).get("inputs"))
+    if inputs is None:
+        inputs = (extra or {}).get("inputs")
+    write_result_json(out, summary, command="intrinsics", inputs=inputs)
     return camera_path, json_path

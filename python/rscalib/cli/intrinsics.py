@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from dataclasses import replace
 
 from .common import EXIT_OK
@@ -11,7 +12,10 @@ def add_parser(sub) -> None:
     p = sub.add_parser(
         "intrinsics", help="calibrate intrinsics and distortion from images or a video of a target",
         description="Intrinsic calibration with OpenCV from still images (files, a glob or a folder) or a "
-                    "video of a calibration target. Writes OUT/camera.yaml and OUT/result.json.")
+                    "video of a calibration target. Writes OUT/camera.yaml (OpenCV; the --camera of the other "
+                    "commands), the same camera for Kalibr (camchain.yaml), Gyroflow (gyroflow_lens_profile.json), "
+                    "ROS (camera_info.yaml), mrcal (camera.cameramodel) and COLMAP (cameras.txt), the detections "
+                    "as mrcal's corners.vnl, and OUT/result.json (docs/formats.md).")
     p.add_argument("inputs", nargs="+", metavar="IMAGES_OR_VIDEO",
                    help="a video, an image folder, or image files (shell glob or quoted pattern)")
     p.add_argument("--target", required=True, metavar="TARGET.yaml", help="Kalibr-style target file")
@@ -28,7 +32,21 @@ def add_parser(sub) -> None:
     p.add_argument("--no-cache", action="store_true", help="detect again even if cached detections exist")
     p.add_argument("--cache-dir", default=None, metavar="DIR", help="detection cache (~/.cache/rscalib/detections)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_lens_profile_options(p)
     p.set_defaults(func=run)
+
+
+def add_lens_profile_options(p: argparse.ArgumentParser) -> None:
+    """--camera-brand, --camera-model, --lens-model: what Gyroflow shows of a lens profile."""
+    group = p.add_argument_group("lens profile (the names Gyroflow shows and searches)")
+    group.add_argument("--camera-brand", default="", metavar="NAME", help="e.g. GoPro, Sony")
+    group.add_argument("--camera-model", default="", metavar="NAME", help="e.g. HERO9 Black, a7 III")
+    group.add_argument("--lens-model", default="", metavar="NAME", help="e.g. Wide, 16-35mm at 16mm")
+
+
+def lens_profile_names(args: argparse.Namespace) -> dict:
+    return {"camera_brand": args.camera_brand.strip(), "camera_model": args.camera_model.strip(),
+            "lens_model": args.lens_model.strip()}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -57,8 +75,9 @@ def run(args: argparse.Namespace) -> int:
                               cache_dir=args.cache_dir, progress=not args.quiet, options=options)
     result = calibrate_intrinsics(detections, model=args.model, max_views=args.max_views)
     camera_path, json_path = write_intrinsics(result, args.out, detections,
-                                              extra={"target": {"target_type": target.target_type, **target.spec},
-                                                     "inputs": [str(i) for i in args.inputs]})
+                                              extra={"target": {"target_type": target.target_type, **target.spec}},
+                                              inputs={"images": [str(i) for i in args.inputs], "target": args.target},
+                                              gyroflow=lens_profile_names(args))
 
     dropped = ", ".join(f"{n} {r.replace('_', ' ')}" for r, n in sorted(detections.dropped.items())) or "none"
     cached = " (cached)" if detections.from_cache else ""
@@ -72,5 +91,9 @@ def run(args: argparse.Namespace) -> int:
     print("  largest per-view RMS: " + ", ".join(f"{label} {e:.3f} px" for e, label in worst))
     for warning in detections.warnings + result.warnings:
         print(f"  warning: {warning}")
-    print(f"  wrote {camera_path} and {json_path}")
+    summary = json.loads(json_path.read_text())
+    for note in summary.get("export_notes", []):
+        print(f"  note: {note}")
+    others = [name for role, name in summary["files"].items() if role != "opencv_yaml"]
+    print(f"  wrote {camera_path}, {json_path} and, for other tools, {', '.join(others)} in {args.out}")
     return EXIT_OK

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from .common import CAPTURE_GUIDE, EXIT_INTERNAL, EXIT_NOT_TRUSTED, EXIT_OK, EXIT_UNDETERMINED
+from .intrinsics import add_lens_profile_options, lens_profile_names
 
 # `rscalib linedelay` exit codes (README: exit codes): 0 trusted, 2 bad input, 3 undetermined, and
 EXIT_CODES_HELP = ("exit codes: 0 the line delay is estimated and every check passed (trust it); "
@@ -29,7 +30,9 @@ _FLAG_WORDS = (("robust_loss='huber'", "--robust huber"), ("lower min_segment_s"
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("video", help="video file, or a folder of images (file-name order, optional timestamps.txt)")
     p.add_argument("--target", required=True, help="target YAML (Kalibr fields: checkerboard, circlegrid, aprilgrid; or ChArUco)")
-    p.add_argument("--camera", required=True, help="camera YAML (OpenCV FileStorage or Kalibr camchain)")
+    p.add_argument("--camera", required=True,
+                   help="camera file: OpenCV YAML, Kalibr camchain, ROS camera_info, mrcal .cameramodel, COLMAP "
+                        "cameras.txt or Gyroflow profile (docs/formats.md)")
     p.add_argument("--out", required=True, help="output folder (created)")
     p.add_argument("--pixel-sigma", type=float, default=None,
                    help="detection noise in px (default: estimated from the target grid)")
@@ -46,7 +49,8 @@ def add_parser(sub) -> None:
                        description="Detect the target in every frame, estimate the continuous-time trajectory and "
                                    "the line delay jointly, check it on the two halves of the video, and write "
                                    "result.json, report.html (with advice on filming), plots, the trajectory and "
-                                   "camera files with the line delay (OpenCV, Kalibr, Gyroflow).",
+                                   "camera files with the line delay (OpenCV, Kalibr, Gyroflow, ROS, mrcal, COLMAP; "
+                                   "docs/formats.md).",
                        epilog=EXIT_CODES_HELP)
     _add_common(p)
     p.add_argument("--start", type=float, default=None, metavar="S", help="use frames from S seconds on")
@@ -58,23 +62,29 @@ def add_parser(sub) -> None:
                    help="shortest knot segment the adaptation may create (default: half a frame, at most 16.7 ms)")
     p.add_argument("--no-self-check", action="store_true",
                    help="do not solve the two halves of the video separately (faster; the error bar is not checked)")
-    p.add_argument("--noise-model", choices=["frame", "video"], default="frame",
-                   help="frame: a sigma per frame plus repeating errors learnt from the residuals (default); "
-                        "video: one sigma for the whole video (the old model)")
     p.add_argument("--max-rounds", type=int, default=8, help="knot-adaptation rounds at most (8)")
-    p.add_argument("--trajectory", choices=["spline", "linear"], default="spline",
-                   help="trajectory model: the adaptive cubic B-spline (spline, default) or the baseline of "
-                        "per-frame poses interpolated linearly / by SLERP (linear, Hedborg et al. 2012)")
-    p.add_argument("--uniform-knots", type=int, default=None, metavar="N",
-                   help="spline only: N uniform knot segments, no knot adaptation (for experiments)")
-    p.add_argument("--no-standardise", action="store_true",
-                   help="spline only: weight errors by 1/sigma instead of the A R A^T standardisation")
-    p.add_argument("--no-motion-prior", action="store_true", help="spline only: no acceleration prior")
+    add_lens_profile_options(p)
+    advanced = p.add_argument_group("advanced (baselines and ablations for experiments; the defaults are the method)")
+    advanced.add_argument("--noise-model", choices=["frame", "video"], default="frame",
+                          help="frame: a sigma per frame plus repeating errors learnt from the residuals (default); "
+                               "video: one sigma for the whole video (the old model)")
+    advanced.add_argument("--trajectory", choices=["spline", "linear"], default="spline",
+                          help="trajectory model: a smooth curve through time (spline, default) or the baseline of "
+                               "per-frame poses interpolated linearly between frames (linear)")
+    advanced.add_argument("--uniform-knots", type=int, default=None, metavar="N",
+                          help="spline only: N equal time segments, no adaptation to the motion")
+    advanced.add_argument("--no-standardise", action="store_true",
+                          help="spline only: treat every detection's error as plain pixel noise, ignoring how "
+                               "image motion during the readout stretches it")
+    advanced.add_argument("--no-motion-prior", action="store_true",
+                          help="spline only: no penalty on the trajectory's acceleration")
     p.set_defaults(func=run_linedelay)
 
     q = sub.add_parser("localize", help="continuous-time trajectory with a known line delay, vs per-frame PnP",
                        description="Estimate the camera trajectory of a rolling-shutter video with a known line "
-                                   "delay (paper §5.1) and compare it with per-frame global-shutter PnP.")
+                                   "delay and compare it with per-frame global-shutter poses (PnP). Writes "
+                                   "trajectory.csv (world-to-camera) and trajectory_tum.txt (TUM format, "
+                                   "camera-to-world).")
     _add_common(q)
     q.add_argument("--line-delay", type=float, default=None,
                    help="line delay in s/row (default: from the camera file, if it has one)")
@@ -177,7 +187,7 @@ def _run_linedelay(args) -> int:
                           readout=args.readout, self_check=not args.no_self_check,
                           min_segment_s=None if args.min_segment_ms is None else args.min_segment_ms * 1e-3,
                           noise_model=args.noise_model, **_common_options(args, solving))
-    summary = write_video_outputs(run, args.out)
+    summary = write_video_outputs(run, args.out, gyroflow=lens_profile_names(args))
     result = run.result
     status = summary["verdict"]["status"]
     if status == UNDETERMINED:
@@ -187,8 +197,11 @@ def _run_linedelay(args) -> int:
         std = result.line_delay_std_s
         verdict = ("(linear-interpolation baseline)" if run.model == "linear"
                    else summary["verdict"]["headline"].split(": ")[-1])
+        image_ms = summary.get("image_readout_time_s", result.readout_time_s) * 1e3
+        rows_note = "" if abs(image_ms - result.readout_time_s * 1e3) < 1e-9 else \
+            f" over {result.rows} rows (image rows: {image_ms:.4f} ms)"
         print(f"line delay {result.line_delay_s * 1e6:.4f} +- {std * 1e6:.4f} us/row, readout "
-              f"{result.readout_time_s * 1e3:.4f} ms; J/2N {result.normalised_cost:.3f}"
+              f"{result.readout_time_s * 1e3:.4f} ms{rows_note}; J/2N {result.normalised_cost:.3f}"
               + (" " if run.model == "linear" else "; ") + verdict)
         for reason in summary["verdict"]["reasons"]:
             print(f"  because: {in_flags(reason)}")

@@ -14,25 +14,30 @@ from .common import CAPTURE_GUIDE, EXIT_OK, EXIT_UNDETERMINED
 def add_parser(sub) -> None:
     p = sub.add_parser("selfcalib", help="self-calibrate f, principal point and radial distortion from a "
                                          "video or image folder of a natural scene",
-                       description="Sequential self-calibration with a Sum-of-Gaussians bank of inverse-depth "
-                                   "monocular SLAM EKFs (Civera et al. 2009). An image folder is read in file-name "
-                                   "order with an optional timestamps.txt (one time in seconds per line).")
+                       description="Estimate the focal length, principal point and two radial distortion terms, "
+                                   "with 99 % bounds, from 10 s or more of walking and looking around a textured "
+                                   "scene (no target): many candidate cameras track the scene side by side and the "
+                                   "ones the images contradict are dropped (docs/sog.md). An image folder is read in "
+                                   "file-name order with an optional timestamps.txt (one time in seconds per line).")
     p.add_argument("source", help="video file or image folder")
     p.add_argument("--out", required=True, help="output folder (created)")
     p.add_argument("--pixel-size-mm", type=float, default=0.0112,
                    help="sensor pixel pitch in mm (the distortion radii are in mm; default 0.0112)")
     p.add_argument("--max-frames", type=int, default=None, help="stop after this many frames")
-    p.add_argument("--alpha", type=float, default=None, help="SPRT type I error (default 0.05)")
-    p.add_argument("--beta", type=float, default=None, help="SPRT type II error (default 0.1)")
     p.add_argument("--f-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
-                   help="focal-length range of the initial bank in px (default: the paper's, scaled)")
-    p.add_argument("--bank", choices=["sog", "single"], default="sog",
-                   help="sog: the paper's grid of Gaussians (default); single: one EKF (the baseline the paper "
-                        "compares against), started at --f0 with --f-sigma")
-    p.add_argument("--f0", type=float, default=None,
-                   help="with --bank single: initial focal length in px (default: the middle of the f range)")
-    p.add_argument("--f-sigma", type=float, default=None,
-                   help="with --bank single: initial sigma of f in px (default: a quarter of the f range)")
+                   help="focal lengths in px the candidates start from (default: a wide range for the image size)")
+    advanced = p.add_argument_group("advanced (baselines and tuning for experiments; the defaults are the method)")
+    advanced.add_argument("--alpha", type=float, default=None,
+                          help="chance of dropping a right candidate camera too early (default 0.05)")
+    advanced.add_argument("--beta", type=float, default=None,
+                          help="chance of keeping a wrong candidate camera too long (default 0.1)")
+    advanced.add_argument("--bank", choices=["sog", "single"], default="sog",
+                          help="sog: many candidate cameras side by side (default); single: one filter started at "
+                               "--f0 with --f-sigma (the baseline that can lock onto a wrong focal length)")
+    advanced.add_argument("--f0", type=float, default=None,
+                          help="with --bank single: initial focal length in px (default: the middle of the f range)")
+    advanced.add_argument("--f-sigma", type=float, default=None,
+                          help="with --bank single: initial sigma of f in px (default: a quarter of the f range)")
     p.add_argument("--subpixel", choices=["affine", "parabola"], default="affine",
                    help="match refinement: ECC affine alignment of the patch (default) or a parabola through "
                         "the NCC peak")

@@ -31,6 +31,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
@@ -195,8 +196,32 @@ def aprilgrid_tag_cells(count: int) -> np.ndarray:
 _TAG_CELLS_CACHE: dict = {}
 
 
+class TargetFileWarning(UserWarning):
+    """A target file has keys rscalib does not use (a typo, or a field of another tool)."""
+
+
+# The keys each target type reads (besides target_type); others in a file are reported, not used.
+# Kalibr's aprilgrid may carry codeOffset: 0 (the default) changes nothing.
+KNOWN_KEYS = {
+    "checkerboard": {"targetCols", "targetRows", "rowSpacingMeters", "colSpacingMeters"},
+    "circlegrid": {"targetCols", "targetRows", "spacingMeters", "asymmetricGrid"},
+    "aprilgrid": {"tagCols", "tagRows", "tagSize", "tagSpacing"},
+    "charuco": {"squaresX", "squaresY", "squareLength", "markerLength", "dictionary", "legacyPattern"},
+}
+
+
+def unknown_keys(data: dict, target_type: str) -> list[str]:
+    """Keys of a target file's mapping that its target type does not read."""
+    known = KNOWN_KEYS.get(target_type, set()) | {"target_type"}
+    extra = [str(k) for k in data if k not in known]
+    if target_type == "aprilgrid" and data.get("codeOffset", 0) == 0 and "codeOffset" in extra:
+        extra.remove("codeOffset")
+    return extra
+
+
 def load_target(path) -> Target:
-    """Read a Kalibr-style target YAML; InputError with a one-line reason if it is unusable."""
+    """Read a Kalibr-style target YAML; InputError with a one-line reason if it is unusable, a
+    TargetFileWarning when it has keys that are not used (a typo would otherwise go unnoticed)."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"target file not found: {path}")
@@ -206,9 +231,14 @@ def load_target(path) -> Target:
         first = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise InputError(f"{path}: not valid YAML ({first})") from None
     try:
-        return target_from_dict(data)
+        target = target_from_dict(data)
     except InputError as error:
         raise InputError(f"{path}: {error}") from None
+    extra = unknown_keys(data, target.target_type)
+    if extra:
+        warnings.warn(f"{path}: {', '.join(extra)} not used (a {target.target_type} reads "
+                      f"{', '.join(sorted(KNOWN_KEYS[target.target_type]))})", TargetFileWarning, stacklevel=2)
+    return target
 
 
 def target_from_dict(data: Any) -> Target:

@@ -68,8 +68,9 @@ def per_frame_pnp(observations: Observations, camera: CameraModel, min_points: i
 @dataclass
 class PnpTrajectory:
     """Per-frame GS PnP poses as a trajectory (`rscalib localize --model gs-pnp`): each pose is stamped
-    at its frame's mid-readout time t_i + rows d / 2 (the time a global-shutter fit of a rolling-shutter
-    frame best represents), or at t_i when no line delay is known.
+    at the middle of its frame's image readout, t_i + d x image height / 2 (the time a global-shutter fit
+    of a rolling-shutter frame best represents; trajectory.csv's mid-readout rows use the same time), or
+    at t_i when no line delay is known.
 
     times_s: (F,) of the frames with a pose; states: (F, 6) T_cw [p; phi], rotation vectors unwrapped
     (paper eq. 22) as the spline's state."""
@@ -104,7 +105,8 @@ def pnp_trajectory(observations: Observations, camera: CameraModel, rows: Option
     if np.count_nonzero(poses.ok) == 0:
         raise InputError("no frame has enough target points for a PnP pose")
     readout_s = (line_delay_s or 0.0) * rows
-    times = observations.frame_times_s[poses.ok] + 0.5 * readout_s
+    # the middle of the image's readout (its rows, not the --rows read out): as trajectory.csv
+    times = observations.frame_times_s[poses.ok] + 0.5 * (line_delay_s or 0.0) * observations.image_size[1]
     states = np.c_[poses.translation[poses.ok], _core.unwrap_rotation_vectors(poses.rotation_vector[poses.ok])]
     points = np.bincount(observations.frame_index, minlength=observations.num_frames)[poses.ok]
     return PnpTrajectory(times_s=times, states=states, frames_total=observations.num_frames,
@@ -119,7 +121,7 @@ def compare_with_pnp(result, camera: CameraModel) -> dict:
     far their camera centres differ at the frames' mid-readout times."""
     poses = result.frame_poses
     obs = result.used_observations
-    t_mid = np.clip(obs.frame_times_s + 0.5 * result.readout_time_s, result.trajectory.t_begin,
+    t_mid = np.clip(obs.frame_times_s + 0.5 * result.line_delay_s * obs.image_size[1], result.trajectory.t_begin,
                     result.trajectory.t_end)
     rotations, translations = _core.poses_at(result.trajectory, t_mid)
     centre_rs = -np.einsum("nji,nj->ni", rotations, translations)

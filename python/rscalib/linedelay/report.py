@@ -1,16 +1,23 @@
-"""Outputs of every line-delay result: result.json (through rscalib.io.results), trajectory.csv,
-plots, a self-contained report.html with a verdict, and camera files for other tools (through
-rscalib.io.cameras.write_camera_set).
+"""Outputs of every line-delay result: result.json (through rscalib.io.results), trajectory.csv and
+its TUM twin (rscalib.io.trajectory_files), plots, a self-contained report.html with a verdict and
+the provenance, camera files for other tools (rscalib.io.cameras.write_camera_set) and the
+detections as mrcal's corners.vnl.
+
+Two readout times: `readout_time_s` = d x rows (the rows read out, --rows, default the image
+height) and `image_readout_time_s` = d x the image's lines along the readout (first to last image
+row: Gyroflow's frame_readout_time). trajectory.csv samples each frame at its row 0 and at the
+middle of the image's readout, t + image_readout_time_s / 2.
 
 - `rscalib linedelay` (spline, linear): write_outputs -- everything above;
-- `rscalib localize --model rs-spline`: write_localize_outputs -- result.json, trajectory.csv/.png;
-- `rscalib localize --model gs-pnp`: write_pnp_outputs -- result.json, trajectory.csv;
+- `rscalib localize --model rs-spline`: write_localize_outputs -- result.json, trajectory.csv/.png, TUM;
+- `rscalib localize --model gs-pnp`: write_pnp_outputs -- result.json, trajectory.csv, TUM;
 - a video run of linedelay/pipeline.py: write_video_outputs picks the one of its model.
 """
 from __future__ import annotations
 
 import base64
 import html
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,18 +32,26 @@ from matplotlib.patches import Ellipse  # noqa: E402
 
 from .. import _core  # noqa: E402
 from .._core import CameraModel  # noqa: E402
-from ..io.cameras import write_camera_set  # noqa: E402
+from ..errors import InputError  # noqa: E402
+from ..io.camera_formats.mrcal import write_corners_vnl  # noqa: E402
+from ..io.cameras import FILE_PURPOSES, write_camera_set  # noqa: E402
 from ..io.results import write_result_json  # noqa: E402
+from ..io.trajectory_files import CSV_COLUMNS, write_tum_trajectory  # noqa: E402
+from ..io.trajectory_files import write_trajectory_csv as _write_csv  # noqa: E402
 from .linear import LinearInterpResult  # noqa: E402
 from .pnp import PnpTrajectory  # noqa: E402
 from .spline import LineDelayResult  # noqa: E402
 
 if TYPE_CHECKING:
+    from ..detection.result import DetectionResult
     from .pipeline import VideoResult
 
 # the results write_outputs takes: the line delay estimated with either trajectory model
 Estimate = Union[LineDelayResult, LinearInterpResult]
-TRAJECTORY_HEADER = "t_s,p_x_m,p_y_m,p_z_m,phi_x_rad,phi_y_rad,phi_z_rad"
+TRAJECTORY_HEADER = ",".join(CSV_COLUMNS)   # says world_to_camera: T_cw, x_c = R(phi) x_w + p
+# readout (linedelay.readout, after to_top_down) -> Gyroflow's frame_readout_direction
+GYROFLOW_READOUT = {"top-down": "TopToBottom", "bottom-up": "BottomToTop", "left-right": "LeftToRight",
+                    "right-left": "RightToLeft"}
 
 
 # The verdicts of a line-delay estimate and their exit codes (`rscalib linedelay --help`, README).
@@ -106,13 +121,19 @@ def _time_origin(result: Estimate) -> float:
     return result.trajectory.t_begin
 
 
+def image_readout_time_s(result: Estimate) -> float:
+    """d x the image's lines along the readout: first to last image row (readout_time_s is d x rows)."""
+    return float(result.line_delay_s) * int(result.used_observations.image_size[1])
+
+
 def trajectory_samples(result: Union[Estimate, PnpTrajectory]) -> tuple[np.ndarray, np.ndarray]:
     """(times, (n, 6) states T_cw [p; phi]) of trajectory.csv: for the continuous-time models, every
-    used frame's row-0 and mid-readout time (inside the spline's domain); for per-frame PnP, its poses."""
+    used frame's row-0 time and the middle of its image's readout, t + image_readout_time_s / 2
+    (inside the spline's domain); for per-frame PnP, its poses."""
     if isinstance(result, PnpTrajectory):
         return result.times_s, result.states
     frame_times = result.used_observations.frame_times_s
-    times = np.sort(np.concatenate([frame_times, frame_times + 0.5 * result.readout_time_s]))
+    times = np.sort(np.concatenate([frame_times, frame_times + 0.5 * image_readout_time_s(result)]))
     if isinstance(result, LinearInterpResult):
         return times, result.evaluate(times)
     times = times[(times >= result.trajectory.t_begin) & (times <= result.trajectory.t_end)]
@@ -120,12 +141,8 @@ def trajectory_samples(result: Union[Estimate, PnpTrajectory]) -> tuple[np.ndarr
 
 
 def write_states_csv(path: Path, times, states) -> Path:
-    """The trajectory CSV: t_s, p (3), phi (3); rows without a pose (NaN) are left out."""
-    states = np.asarray(states)
-    ok = np.all(np.isfinite(states), axis=1)
-    np.savetxt(path, np.c_[np.asarray(times)[ok], states[ok]], delimiter=",", header=TRAJECTORY_HEADER,
-               comments="", fmt="%.9f")
-    return Path(path)
+    """The trajectory CSV: t_s, T_cw p (3), phi (3); rows without a pose (NaN) are left out."""
+    return _write_csv(path, times, states)
 
 
 def write_trajectory_csv(result: Union[Estimate, PnpTrajectory], path: Path) -> Path:
@@ -133,11 +150,31 @@ def write_trajectory_csv(result: Union[Estimate, PnpTrajectory], path: Path) -> 
     return write_states_csv(path, *trajectory_samples(result))
 
 
+def write_trajectories(result: Union[Estimate, PnpTrajectory], out: Path) -> dict:
+    """trajectory.csv (world-to-camera) and trajectory_tum.txt (camera-to-world) at the same times."""
+    times, states = trajectory_samples(result)
+    write_states_csv(out / "trajectory.csv", times, states)
+    write_tum_trajectory(out / "trajectory_tum.txt", times, states)
+    return {"trajectory_csv": "trajectory.csv", "trajectory_tum": "trajectory_tum.txt"}
+
+
+def write_detections_vnl(detections: DetectionResult, path: Path) -> Optional[str]:
+    """The detections as mrcal's corners.vnl; the reason instead when the target is not a grid mrcal
+    knows (None when written)."""
+    obs = detections.observations
+    names = [str(label) for label in detections.frame_labels]
+    try:
+        write_corners_vnl(path, names, obs.frame_index, obs.point_id, obs.uv, obs.target_points)
+    except InputError as error:
+        return f"no corners.vnl: {error}"
+    return None
+
+
 # ------------------------------------------------------------------------------------- plots
 
 def _save(fig, path: Path) -> Path:
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")   # nothing cut off (titles, side panels)
     plt.close(fig)
     return path
 
@@ -173,31 +210,45 @@ def plot_residuals_image(result: Estimate, path: Path) -> Path:
 
 
 def plot_covariance_ellipses(result: LineDelayResult, path: Path, count: int = 6) -> Path:
-    """Paper Fig. 2: error covariance A R A^T (red) against R (grey) at a few observations
-    with fast image motion (the solver's image velocities), drawn at their image position and
-    magnified."""
+    """Paper Fig. 2: the error covariance of a moving point (red; the detection noise R mapped by the
+    line delay's image-motion term A, A R A^T) against R alone (grey), at a few observations with fast
+    image motion (the solver's image velocities), drawn at their image position and magnified. Each
+    ellipse is numbered; its speed and det A are listed beside the image, so labels never overlap."""
     obs = result.used_observations
     velocity = result.image_velocity_px_s
     speed = np.linalg.norm(velocity, axis=1)
-    picks = np.argsort(np.nan_to_num(speed, nan=-1.0))[::-1][: max(1, len(speed) // 50)]
-    picks = picks[np.linspace(0, len(picks) - 1, min(count, len(picks))).astype(int)]
-    fig, ax = plt.subplots(figsize=(7, 5.5))
+    fastest = np.argsort(np.nan_to_num(speed, nan=-1.0))[::-1][: max(1, len(speed) // 50)]
+    # spread over the image (farthest point first among the fastest 2 %), so ellipses do not overlap
+    picks = [fastest[0]]
+    distance = np.linalg.norm(obs.uv[fastest] - obs.uv[fastest[0]], axis=1)
+    while len(picks) < min(count, len(fastest)):
+        far = int(np.argmax(distance))
+        picks.append(fastest[far])
+        distance = np.minimum(distance, np.linalg.norm(obs.uv[fastest] - obs.uv[fastest[far]], axis=1))
+    fig, (ax, side) = plt.subplots(1, 2, figsize=(9.5, 5.2), gridspec_kw={"width_ratios": [3, 1.15]})
     scale = 40.0 / max(result.pixel_sigma, 1e-9)
     r = result.pixel_sigma ** 2 * np.eye(2)
-    for i in picks:
+    lines = []
+    for number, i in enumerate(picks, start=1):
         a = _core.error_noise_map(result.line_delay_s, velocity[i])
-        for cov, color in ((r, "0.6"), (a @ r @ a.T, "r")):
+        for cov, color, width in ((r, "0.7", 4.0), (a @ r @ a.T, "r", 1.3)):   # grey wide: visible under red
             values, vectors = np.linalg.eigh(cov)
             angle = np.degrees(np.arctan2(vectors[1, 1], vectors[0, 1]))
             ax.add_patch(Ellipse(obs.uv[i], 2 * scale * np.sqrt(values[1]), 2 * scale * np.sqrt(values[0]),
-                                 angle=angle, fill=False, color=color, lw=1.5))
-        ax.annotate(f"{speed[i]:.0f} px/s, det A = {np.linalg.det(a):.3f}", obs.uv[i], fontsize=7,
-                    xytext=(4, 4), textcoords="offset points")
+                                 angle=angle, fill=False, color=color, lw=width))
+        ax.annotate(str(number), obs.uv[i], fontsize=9, fontweight="bold", ha="center", va="center")
+        lines.append(f"{number}: {speed[i]:.0f} px/s\n    det A = {np.linalg.det(a):.3f}")
     w, h = obs.image_size
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)
     ax.set_aspect("equal")
-    ax.set_title(f"Error covariance A R Aᵀ (red) vs R (grey), 1σ magnified ×{scale:.0f}")
+    ax.set_xlabel("u (px)")
+    ax.set_ylabel("v (px)")
+    fig.suptitle(f"Error covariance with motion (red) vs detection noise alone (grey); 1σ magnified ×{scale:.0f}",
+                 fontsize=10)
+    side.axis("off")
+    side.text(0.0, 1.0, "fastest image motion\n\n" + "\n".join(lines), va="top", ha="left", fontsize=9,
+              family="monospace", transform=side.transAxes)
     return _save(fig, path)
 
 
@@ -276,7 +327,8 @@ def _plots(result: Estimate, out: Path, failed: list) -> dict:
     jobs = [("residuals over time", plot_residuals_time, "residuals_time.png"),
             ("residuals over the image and target coverage", plot_residuals_image, "residuals_image.png")]
     if isinstance(result, LineDelayResult):
-        jobs += [("error covariance ellipses (paper Fig. 2)", plot_covariance_ellipses, "covariance_ellipses.png"),
+        jobs += [("how image motion stretches the detection noise (paper Fig. 2)", plot_covariance_ellipses,
+                  "covariance_ellipses.png"),
                  ("knot density and image motion", plot_knots_and_speed, "knots_speed.png"),
                  ("line delay per knot-adaptation round", plot_rounds, "rounds.png")]
     jobs.append(("trajectory", plot_trajectory, "trajectory.png"))
@@ -307,29 +359,44 @@ def _start(result, out_dir, frames_total: Optional[int], extra: Optional[dict], 
 
 def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_total: Optional[int] = None,
                   extra: Optional[dict] = None, fps: float = 0.0, title: Optional[str] = None,
-                  command: str = "linedelay", inputs: Optional[dict] = None) -> dict:
+                  command: str = "linedelay", inputs: Optional[dict] = None,
+                  detections: Optional[DetectionResult] = None, readout: str = "top-down",
+                  gyroflow: Optional[dict] = None) -> dict:
     """Everything of a line-delay estimate (spline or linear model) into out_dir: result.json,
-    trajectory.csv, the camera files, the plots and report.html. Returns the result.json dict
-    (without its provenance). frames_total: frames read (default: the result's); extra: more
-    result.json fields; fps: for the Gyroflow profile; command, inputs: the provenance."""
+    trajectory.csv and trajectory_tum.txt, the camera files of every format, the detections as
+    corners.vnl (when given), the plots and report.html. Returns the result.json dict (without its
+    provenance). frames_total: frames read (default: the result's); extra: more result.json fields;
+    fps: for the Gyroflow profile; readout: the readout direction (linedelay.readout); gyroflow:
+    camera_brand, camera_model, lens_model for its profile; command, inputs: the provenance."""
     out, summary = _start(result, out_dir, frames_total, extra)
+    summary["image_readout_time_s"] = image_readout_time_s(result)
     v = verdict(result)
     summary["verdict"] = {"trust": v.trust, "status": v.status, "headline": v.headline, "reasons": v.reasons}
     warnings = list(summary["warnings"])
 
-    files = {"trajectory_csv": write_trajectory_csv(result, out / "trajectory.csv").name}
-    camera_files, camera_warnings = write_camera_set(camera, out, result.line_delay_s, fps=fps, rms_px=result.rms_px)
-    files |= camera_files
-    warnings += camera_warnings
+    files = write_trajectories(result, out)
+    exports = write_camera_set(camera, out, result.line_delay_s, fps=fps, rms_px=result.rms_px,
+                               readout_direction=GYROFLOW_READOUT.get(readout), gyroflow=gyroflow)
+    files |= exports.files
+    notes = list(exports.notes)
+    if exports.details:
+        summary["exports"] = exports.details
+    if detections is not None:
+        skipped = write_detections_vnl(detections, out / "corners.vnl")
+        if skipped is None:
+            files["mrcal_corners"] = "corners.vnl"
+        else:
+            notes.append(skipped)
     plots = _plots(result, out, warnings)
     files["plots"] = [p.name for p in plots.values()]
     files["report"] = "report.html"
     summary["warnings"] = warnings
+    summary["export_notes"] = notes
     summary["files"] = files
-    write_result_json(out, summary, command=command, inputs=inputs)
+    result_path = write_result_json(out, summary, command=command, inputs=inputs)
     if title is None:
         title = "rscalib linedelay" + (" --trajectory linear" if isinstance(result, LinearInterpResult) else "")
-    _write_html(out / "report.html", title, summary, v, plots)
+    _write_html(out / "report.html", title, summary, v, plots, _provenance_of(result_path))
     return summary
 
 
@@ -337,13 +404,13 @@ def write_localize_outputs(result: LineDelayResult, out_dir, *, comparison: Opti
                            frames_total: Optional[int] = None, extra: Optional[dict] = None,
                            command: str = "localize", inputs: Optional[dict] = None) -> dict:
     """A trajectory with a known line delay (rscalib.localize) into out_dir: result.json (with the
-    comparison against per-frame GS PnP, linedelay.pnp.compare_with_pnp), trajectory.csv and
-    trajectory.png. Returns the result.json dict."""
+    comparison against per-frame GS PnP, linedelay.pnp.compare_with_pnp), trajectory.csv,
+    trajectory_tum.txt and trajectory.png. Returns the result.json dict."""
     out, summary = _start(result, out_dir, frames_total, extra, trajectory_model="rs-spline",
                           gs_pnp_comparison=comparison)
     summary.pop("line_delay_std_s", None)  # d was given, not estimated
-    summary["files"] = {"trajectory_csv": write_trajectory_csv(result, out / "trajectory.csv").name,
-                        "plots": [plot_trajectory(result, out / "trajectory.png").name]}
+    summary["image_readout_time_s"] = image_readout_time_s(result)
+    summary["files"] = write_trajectories(result, out) | {"plots": [plot_trajectory(result, out / "trajectory.png").name]}
     write_result_json(out, summary, command=command, inputs=inputs)
     return summary
 
@@ -351,34 +418,36 @@ def write_localize_outputs(result: LineDelayResult, out_dir, *, comparison: Opti
 def write_pnp_outputs(trajectory: PnpTrajectory, out_dir, *, frames_total: Optional[int] = None,
                       extra: Optional[dict] = None, command: str = "localize",
                       inputs: Optional[dict] = None) -> dict:
-    """Per-frame GS PnP poses (linedelay.pnp.pnp_trajectory) into out_dir: result.json and a
-    trajectory.csv in the format of the other models. Returns the result.json dict."""
+    """Per-frame GS PnP poses (linedelay.pnp.pnp_trajectory) into out_dir: result.json, and
+    trajectory.csv and trajectory_tum.txt in the format of the other models. Returns the result.json dict."""
     out, summary = _start(trajectory, out_dir, frames_total, extra)
-    summary["files"] = {"trajectory_csv": write_trajectory_csv(trajectory, out / "trajectory.csv").name}
+    summary["files"] = write_trajectories(trajectory, out)
     write_result_json(out, summary, command=command, inputs=inputs)
     return summary
 
 
-def write_video_outputs(run: VideoResult, out_dir, command: Optional[str] = None) -> dict:
+def write_video_outputs(run: VideoResult, out_dir, command: Optional[str] = None,
+                        gyroflow: Optional[dict] = None) -> dict:
     """The outputs of a linedelay/pipeline.py run, by its model; returns the result.json dict.
-    command: the provenance's command (default: `linedelay` or `localize`, by the model)."""
+    command: the provenance's command (default: `linedelay` or `localize`, by the model);
+    gyroflow: camera_brand, camera_model, lens_model for the Gyroflow profile."""
     common = dict(frames_total=run.detection.frames_total, extra=run.summary_extra(), inputs=run.inputs,
                   command=command or run.command)
     if run.model == "rs-spline":
         return write_localize_outputs(run.result, out_dir, comparison=run.comparison, **common)
     if run.model == "gs-pnp":
         return write_pnp_outputs(run.result, out_dir, **common)
-    return write_outputs(run.result, run.camera, out_dir, fps=run.fps, **common)
+    return write_outputs(run.result, run.camera, out_dir, fps=run.fps, detections=run.detection,
+                         readout=run.settings.get("readout", "top-down"), gyroflow=gyroflow, **common)
+
+
+def _provenance_of(result_path: Path) -> dict:
+    return json.loads(result_path.read_text()).get("provenance", {})
 
 
 def _img(path: Path) -> str:
     data = base64.b64encode(path.read_bytes()).decode("ascii")
     return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.stem)}">'
-
-
-# result.json "files" roles listed at the foot of report.html, with what reads them
-_FILE_NOTES = (("trajectory_csv", ""), ("opencv_yaml", " (OpenCV)"), ("kalibr_camchain", " (Kalibr)"),
-               ("gyroflow_profile", " (Gyroflow)"))
 
 
 def _table_rows(summary: dict) -> list[tuple[str, object]]:
@@ -395,7 +464,9 @@ def _table_rows(summary: dict) -> list[tuple[str, object]]:
         spread = "—" if std is None else f"{std * 1e6:.4f} µs/row"
     return [("line delay", value),
             ("standard deviation", spread),
-            ("readout time", f"{summary['readout_time_s'] * 1e3:.4f} ms ({summary['rows']} rows)"),
+            ("readout time (sensor)", f"{summary['readout_time_s'] * 1e3:.4f} ms ({summary['rows']} rows read out)"),
+            ("image readout time", "—" if summary.get("image_readout_time_s") is None else
+             f"{summary['image_readout_time_s'] * 1e3:.4f} ms (first to last image row; Gyroflow's frame_readout_time)"),
             ("frames used / total", f"{summary['frames_used']} / {summary['frames_total']}"),
             ("observations", summary["observations"]),
             size,
@@ -423,7 +494,60 @@ def _half(h: dict) -> str:
             + ("" if h.get("determined") else " (not determined)"))
 
 
-def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict) -> None:
+def files_html(files: dict) -> str:
+    """The files a run wrote, each a link with one line on what it is for (io.cameras.FILE_PURPOSES)."""
+    items = [("result.json", FILE_PURPOSES["result_json"])]
+    for role, name in files.items():
+        if role in FILE_PURPOSES and isinstance(name, str) and role != "report":
+            items.append((name, FILE_PURPOSES[role]))
+    for name in files.get("plots", []):
+        items.append((name, "a plot shown above"))
+    return "<ul>" + "".join(f'<li><a href="{html.escape(n)}">{html.escape(n)}</a>: {html.escape(what)}</li>'
+                            for n, what in items) + "</ul>"
+
+
+def provenance_html(provenance: dict) -> str:
+    """Which rscalib, command line, input files (with SHA-256), camera and target as read."""
+    rows = [("rscalib", provenance.get("rscalib_version")), ("command line", provenance.get("command_line")),
+            ("created (UTC)", provenance.get("created_utc"))]
+    for role, record in (provenance.get("input_files") or {}).items():
+        for r in record if isinstance(record, list) else [record]:
+            count = f", {r['files']} files" if "files" in r else ""
+            rows.append((f"input: {role}", f"{r['path']} ({r['bytes']} bytes{count}; sha256 {r['sha256'][:16]}…)"))
+    camera = provenance.get("camera_as_read")
+    if camera and "model" in camera:
+        values = ", ".join(f"{n} {v:.6g}" for n, v in zip(camera["param_names"], camera["params"]))
+        rows.append(("camera as read", f"{camera['model']} {camera['width']}x{camera['height']} from a "
+                                       f"{camera['format']} file: {values}"))
+    target = provenance.get("target_as_read")
+    if target and "target_type" in target:
+        rows.append(("target as read", ", ".join(f"{k} {v}" for k, v in target.items())))
+    if provenance.get("rows") is not None:
+        rows.append(("rows read out", provenance["rows"]))
+    return "<table>" + "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(v))}</td></tr>"
+                               for k, v in rows if v is not None) + "</table>"
+
+
+def intrinsics_html(summary: dict) -> str:
+    """--refine-intrinsics: the refined intrinsics, their sigma, the prior and the correlation with d."""
+    ki = summary.get("intrinsics")
+    if not ki:
+        return ""
+    corr = ki.get("correlation_with_line_delay") or {}
+
+    def num(x, fmt=".6g"):
+        return "—" if x is None else format(x, fmt)
+    rows = "".join(f"<tr><td>{html.escape(n)}</td><td>{num(ki['initial'][n])}</td><td>{num(ki['estimate'][n])}</td>"
+                   f"<td>{num(ki['std'][n], '.3g')}</td><td>{num(ki['prior']['std'][n], '.3g')}</td>"
+                   f"<td>{num(corr.get(n), '+.3f')}</td></tr>" for n in ki["names"])
+    return ("<h2>Intrinsics refined with the line delay</h2><table><tr><th>parameter</th><th>given</th>"
+            "<th>refined</th><th>σ</th><th>prior σ</th><th>correlation with d</th></tr>" + rows + "</table>"
+            f"<p>Prior: {html.escape(ki['prior']['source'])}. The full covariance of [d, intrinsics] is in "
+            "result.json (intrinsics.covariance); the camera files carry the refined intrinsics.</p>")
+
+
+def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict,
+                provenance: Optional[dict] = None) -> None:
     table = "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(val))}</td></tr>"
                     for k, val in _table_rows(summary))
     reasons = "".join(f"<li>{html.escape(r)}</li>" for r in v.reasons)
@@ -444,8 +568,7 @@ def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict) 
         z = "" if check.get("z") is None else f" (z = {check['z']:.2f})"
         check_html = (f"<h2>Self-check: the two halves {state}{html.escape(z)}</h2><ul>{halves}</ul>"
                       f"<p>{html.escape(check.get('rule', ''))}</p>")
-    files = ", ".join(["result.json"] + [summary["files"][role] + note for role, note in _FILE_NOTES
-                                         if role in summary["files"]])
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in summary.get("export_notes", []))
     color = "#1a7f37" if v.trust else "#b35900"
     path.write_text(f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}}
@@ -456,8 +579,12 @@ figure{{margin:1.5em 0}}img{{max-width:100%}}figcaption{{color:#555;font-size:90
 <div class="verdict"><strong>{html.escape(v.headline)}</strong>{'<ul>' + reasons + '</ul>' if reasons else ''}{'' if v.trust else '<p>How to film a better calibration video: docs/capture.md in the rscalib repository.</p>'}</div>
 <h2>Result</h2><table>{table}</table>
 {check_html}
+{intrinsics_html(summary)}
 {guidance_html}
 {'<h2>Warnings</h2><ul>' + warnings + '</ul>' if warnings else ''}
 <h2>Plots</h2>{figures}
-<p>Files: {html.escape(files)}. Conventions: row 0 of a frame is exposed at its timestamp, row v at t + v·d.</p>
+<h2>Files</h2>{files_html(summary["files"])}{'<p>About the exports:</p><ul>' + notes + '</ul>' if notes else ''}
+<p>Conventions: row 0 of a frame is exposed at its timestamp, row v at t + v·d; trajectory.csv holds the
+world(target)-to-camera pose, trajectory_tum.txt the camera-to-world pose; formats: docs/formats.md.</p>
+<h2>Provenance</h2>{provenance_html(provenance or {})}
 </body></html>""")

@@ -154,7 +154,8 @@ def test_cli_trajectory_linear(video, tmp_path):
         assert key in result
     with open(tmp_path / "lin" / "trajectory.csv") as f:
         rows = list(csv.reader(f))
-    assert rows[0] == ["t_s", "p_x_m", "p_y_m", "p_z_m", "phi_x_rad", "phi_y_rad", "phi_z_rad"]
+    assert rows[0] == ["t_s"] + [f"world_to_camera_{q}_{a}_{u}" for q, u in (("p", "m"), ("phi", "rad"))
+                                 for a in "xyz"]
     assert len(rows) - 1 == 2 * result["frames_used"]
 
 

@@ -1,0 +1,146 @@
+"""mrcal camera models (.cameramodel) and corner files (corners.vnl).
+
+A .cameramodel is a Python dict literal (mrcal reads it with ast.literal_eval; `#` starts a
+comment): lensmodel, intrinsics, imagersize [w h], extrinsics rt_cam_ref (6), and optionally
+valid_intrinsics_region and optimization_inputs. Pixels follow OpenCV's convention and
+LENSMODEL_OPENCVn is cv2.projectPoints with the first n of k1 k2 p1 p2 k3 k4 k5 k6 (...). rscalib
+reads LENSMODEL_PINHOLE, OPENCV4, OPENCV5 and OPENCV8 (with k4..k6 = 0); it writes OPENCV4 or
+OPENCV5. mrcal has no model equal to OpenCV's fisheye, so a pinhole-equidistant camera is not
+written (its detections still are).
+
+corners.vnl is mrcal's corner cache (mrcal-calibrate-cameras --corners-cache, and
+mrcal.compute_chessboard_corners): `filename x y level` rows, the W x H grid points of each image
+in a row-major order, x fastest; a missing point is `- -` with level `-`; level 0 = weight 1.
+"""
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from ..._core import CameraModel
+from ..._version import __version__
+from ...errors import InputError
+from .common import RADTAN, CameraFile, supported
+
+# lensmodel -> number of distortion values after fx fy cx cy
+MRCAL_READ_MODELS = {"LENSMODEL_PINHOLE": 0, "LENSMODEL_OPENCV4": 4, "LENSMODEL_OPENCV5": 5,
+                     "LENSMODEL_OPENCV8": 8}
+
+
+def is_mrcal(path: Path, text: str) -> bool:
+    return path.suffix == ".cameramodel" or bool(re.match(r"\s*(#.*\n\s*)*\{", text) and "intrinsics" in text
+                                                 and ("lensmodel" in text or "distortion_model" in text))
+
+
+def _strip_comments(text: str) -> str:
+    # mrcal writes comments on lines of their own; strings never hold '#'
+    return "\n".join(line.split("#", 1)[0] for line in text.splitlines())
+
+
+def read_mrcal(path: Path, text: str) -> CameraFile:
+    try:
+        data = ast.literal_eval(_strip_comments(text))
+    except (ValueError, SyntaxError, MemoryError, RecursionError):
+        raise InputError(f"{path}: not an mrcal .cameramodel (a Python dict literal)") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: not an mrcal .cameramodel (a Python dict literal)")
+    model = str(data.get("lensmodel", data.get("distortion_model", ""))).replace("DISTORTION", "LENSMODEL")
+    if model not in MRCAL_READ_MODELS:
+        raise InputError(f"{path}: lensmodel '{model}' is not supported; supported: {supported(MRCAL_READ_MODELS)}")
+    try:
+        intrinsics = np.asarray([float(v) for v in data["intrinsics"]], dtype=np.float64)
+        width, height = (int(v) for v in data["imagersize"])
+    except (KeyError, TypeError, ValueError):
+        raise InputError(f"{path}: fields intrinsics and imagersize [w, h] are needed") from None
+    count = 4 + MRCAL_READ_MODELS[model]
+    if intrinsics.size != count:
+        raise InputError(f"{path}: {model} needs {count} intrinsics, has {intrinsics.size}")
+    dist = np.zeros(5)
+    dist[:min(5, count - 4)] = intrinsics[4:9]
+    if count > 9 and np.any(intrinsics[9:] != 0):
+        raise InputError(f"{path}: {model} with k4, k5, k6 != 0 is not supported (rscalib's pinhole-radtan has "
+                         "k1 k2 p1 p2 k3)")
+    fx, fy, cx, cy = intrinsics[:4]
+    if not (fx > 0 and fy > 0 and width > 0 and height > 0):
+        raise InputError(f"{path}: intrinsics and imagersize must be positive")
+    camera = CameraModel(RADTAN, np.r_[intrinsics[:4], dist], width, height)
+    notes = []
+    extrinsics = data.get("extrinsics")
+    if extrinsics is not None and np.any(np.asarray(extrinsics, dtype=float) != 0):
+        notes.append(f"{path}: the extrinsics (rt_cam_ref) are not used")
+    return CameraFile(camera, None, "mrcal", notes)
+
+
+def _numbers(values) -> str:
+    return "[ " + ", ".join(f"{float(v):.17g}" for v in values) + ", ]"
+
+
+def write_mrcal_cameramodel(camera: CameraModel, path, note: str = "") -> None:
+    """LENSMODEL_OPENCV5 (OPENCV4 when k3 = 0) with identity extrinsics. InputError for
+    pinhole-equidistant (mrcal has no such model)."""
+    if camera.model != RADTAN:
+        raise InputError(f"mrcal has no lens model equal to {camera.model} (OpenCV's fisheye); "
+                         "a .cameramodel is written for pinhole-radtan only")
+    p = np.asarray(camera.params, dtype=np.float64)
+    lensmodel, values = ("LENSMODEL_OPENCV4", p[:8]) if p[8] == 0 else ("LENSMODEL_OPENCV5", p[:9])
+    lines = [f"# written by rscalib {__version__}" + (f": {note}" if note else ""),
+             "# intrinsics: fx fy cx cy k1 k2 p1 p2" + (" k3" if lensmodel.endswith("5") else ""),
+             "{",
+             f"    'lensmodel':  '{lensmodel}',",
+             f"    'intrinsics': {_numbers(values)},",
+             f"    'imagersize': [ {int(camera.width)}, {int(camera.height)}, ],",
+             "    'extrinsics': [ 0, 0, 0, 0, 0, 0, ],",
+             "}", ""]
+    Path(path).write_text("\n".join(lines))
+
+
+def regular_grid(points_m: np.ndarray, tolerance_m: float = 1e-9) -> Optional[tuple[int, int, float]]:
+    """(W, H, spacing_m) when the target points are the W x H grid mrcal's chessboard model
+    assumes (point j W + i at (i, j) * spacing, equal spacing in x and y), else None."""
+    points = np.asarray(points_m, dtype=np.float64)
+    if points.ndim != 2 or len(points) < 4:
+        return None
+    width = int(np.sum(np.abs(points[:, 1] - points[0, 1]) <= tolerance_m))
+    if width < 2 or len(points) % width:
+        return None
+    height = len(points) // width
+    spacing = float(points[1, 0] - points[0, 0])
+    if spacing <= 0:
+        return None
+    j, i = np.divmod(np.arange(len(points)), width)
+    expected = np.c_[i * spacing, j * spacing] + points[0, :2]
+    if np.max(np.abs(points[:, :2] - expected)) > tolerance_m or np.any(np.abs(points[:, 2]) > tolerance_m):
+        return None
+    return width, height, spacing
+
+
+def write_corners_vnl(path, frame_names: list, frame_index: np.ndarray, point_id: np.ndarray, uv: np.ndarray,
+                      points_m: np.ndarray) -> int:
+    """mrcal's corners.vnl of detections (frame of each observation, target point id, pixel) of a
+    target whose points form a regular grid (regular_grid). frame_names: one name per frame (no
+    spaces; mrcal matches them against its image globs). Returns the number of images written.
+    InputError when the target is not such a grid (AprilGrid: gaps between tags)."""
+    grid = regular_grid(points_m)
+    if grid is None:
+        raise InputError("mrcal's corners.vnl needs a target of equally spaced points in a full grid "
+                         "(a checkerboard with equal row and column spacing, a symmetric circle grid, ChArUco)")
+    width, height, _ = grid
+    rows = [f"## written by rscalib {__version__}: target grid {width} x {height}, pixels in OpenCV's convention",
+            "# filename x y level"]
+    frames = 0
+    for f, name in enumerate(frame_names):
+        mine = frame_index == f
+        if not np.any(mine):
+            continue
+        table = np.full((width * height, 2), np.nan)
+        table[point_id[mine]] = uv[mine]
+        safe = re.sub(r"\s", "_", str(name))
+        for u, v in table:
+            rows.append(f"{safe} - - -" if not np.isfinite(u) else f"{safe} {u:.6f} {v:.6f} 0")
+        frames += 1
+    Path(path).write_text("\n".join(rows) + "\n")
+    return frames

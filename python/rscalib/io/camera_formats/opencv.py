@@ -1,0 +1,100 @@
+"""OpenCV FileStorage camera files (YAML, also XML/JSON on reading), read and written through
+cv2.FileStorage itself: OpenCV's `%YAML:1.0` header and `!!opencv-matrix` tags are not plain YAML.
+
+pinhole-radtan uses OpenCV's usual keys (`camera_matrix`, `distortion_coefficients` k1 k2 p1 p2 k3),
+so any reader of OpenCV calibration files reads it right. pinhole-equidistant (cv2.fisheye) puts
+its matrices under `fisheye_camera_matrix` and `fisheye_distortion_coefficients` (k1..k4): a generic
+reader then fails instead of taking k1..k4 for k1, k2, p1, p2. Both carry `camera_model` with
+rscalib's model name, the name result.json uses. Files of older rscalib versions (plain keys with
+`distortion_model: fisheye`) are still read.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Optional
+
+import cv2
+import numpy as np
+
+from ..._core import CameraModel
+from ...errors import InputError
+from .common import EQUIDISTANT, RADTAN, CameraFile, camera_from_opencv, image_lines, opencv_matrices
+
+FISHEYE_PREFIX = "fisheye_"
+# `distortion_model` values of older rscalib files and other tools that mean the fisheye model
+_EQUIDISTANT_NAMES = ("fisheye", "equidistant", EQUIDISTANT, "kannala-brandt", "opencv_fisheye")
+
+
+def _node_string(storage, key: str) -> str:
+    node = storage.getNode(key)
+    return node.string() if not node.empty() and node.isString() else ""
+
+
+def read_opencv(path: Path) -> CameraFile:
+    try:
+        storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except cv2.error:
+        raise InputError(f"{path}: not a camera file rscalib reads (OpenCV FileStorage, Kalibr camchain, "
+                         "ROS camera_info, mrcal .cameramodel, COLMAP cameras.txt)") from None
+    try:
+        if not storage.isOpened():
+            raise InputError(f"{path}: not an OpenCV FileStorage file")
+        model = _node_string(storage, "camera_model")
+        legacy = _node_string(storage, "distortion_model")
+        fisheye_keys = not storage.getNode(FISHEYE_PREFIX + "camera_matrix").empty()
+        prefix = FISHEYE_PREFIX if fisheye_keys else ""
+        k = storage.getNode(prefix + "camera_matrix").mat()
+        dist = storage.getNode(prefix + "distortion_coefficients").mat()
+        width = storage.getNode("image_width").real()
+        height = storage.getNode("image_height").real()
+        line_delay_node = storage.getNode("line_delay_s")
+        line_delay = None if line_delay_node.empty() else float(line_delay_node.real())
+    finally:
+        storage.release()
+    if k is None or k.shape != (3, 3):
+        raise InputError(f"{path}: field camera_matrix (3x3 !!opencv-matrix) is missing")
+    if not width or not height:
+        raise InputError(f"{path}: fields image_width and image_height are missing")
+    if model and model not in (RADTAN, EQUIDISTANT):
+        raise InputError(f"{path}: camera_model '{model}' is not supported ({RADTAN} or {EQUIDISTANT})")
+    if not model:
+        model = EQUIDISTANT if fisheye_keys or legacy in _EQUIDISTANT_NAMES else RADTAN
+    dist = np.zeros(5) if dist is None else dist.ravel()
+    try:
+        camera = camera_from_opencv(k, dist, int(width), int(height), model)
+    except InputError as error:
+        raise InputError(f"{path}: {error}") from None
+    return CameraFile(camera, line_delay, "opencv")
+
+
+def write_opencv_yaml(camera: CameraModel, path, line_delay_s: Optional[float] = None,
+                      extra: Optional[dict] = None, readout_direction: Optional[str] = None) -> None:
+    """OpenCV FileStorage YAML: camera_model, image size, the camera matrix and distortion (fisheye_
+    keys for pinhole-equidistant), and with a line delay: line_delay_s (s/row) and
+    image_readout_time_s = line_delay_s x the image lines along the readout (first to last image
+    row; the sensor's readout_time_s over all rows read out is in result.json)."""
+    k, dist = opencv_matrices(camera)
+    fisheye = camera.model == EQUIDISTANT
+    prefix = FISHEYE_PREFIX if fisheye else ""
+    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    try:
+        if fisheye:
+            storage.writeComment("pinhole-equidistant: OpenCV's fisheye model (cv2.fisheye.projectPoints), "
+                                 "fisheye_distortion_coefficients = k1 k2 k3 k4; the keys say fisheye_ so that "
+                                 "readers of plain camera_matrix/distortion_coefficients (k1 k2 p1 p2) do not misread it")
+        storage.write("camera_model", camera.model)
+        storage.write("calibration_time", time.strftime("%Y-%m-%d %H:%M:%S"))
+        storage.write("image_width", int(camera.width))
+        storage.write("image_height", int(camera.height))
+        storage.write(prefix + "camera_matrix", k)
+        storage.write(prefix + "distortion_coefficients", dist.reshape(1, -1))
+        if line_delay_s is not None:
+            storage.write("line_delay_s", float(line_delay_s))
+            storage.write("image_readout_time_s", float(line_delay_s) * image_lines(camera, readout_direction))
+            if readout_direction is not None:
+                storage.write("readout_direction", readout_direction)
+        for key, value in (extra or {}).items():
+            storage.write(key, value)
+    finally:
+        storage.release()

@@ -1,0 +1,48 @@
+"""Trajectory files: trajectory.csv (rscalib's own, world-to-camera) and the TUM format
+(camera-to-world), so that a trajectory goes straight into evo, the TUM RGB-D tools or any SLAM
+evaluation script.
+
+- trajectory.csv: `t_s` then T_cw = (p, phi) at that time, x_c = R(phi) x_w + p (docs/conventions.md);
+  the column names say world_to_camera so the file cannot be taken for camera poses in the world.
+- TUM: `timestamp tx ty tz qx qy qz qw`, space separated, `#` comments: the camera centre in the
+  world (-R^T p) and the camera-to-world rotation R^T as a unit quaternion, scalar last.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+CSV_COLUMNS = ("t_s", "world_to_camera_p_x_m", "world_to_camera_p_y_m", "world_to_camera_p_z_m",
+               "world_to_camera_phi_x_rad", "world_to_camera_phi_y_rad", "world_to_camera_phi_z_rad")
+TUM_HEADER = ("# TUM trajectory written by rscalib: camera pose in the world (target) frame, camera-to-world\n"
+              "# timestamp tx ty tz qx qy qz qw")
+
+
+def _finite(times, states) -> tuple[np.ndarray, np.ndarray]:
+    states = np.asarray(states, dtype=np.float64).reshape(-1, 6)
+    ok = np.all(np.isfinite(states), axis=1)
+    return np.asarray(times, dtype=np.float64)[ok], states[ok]
+
+
+def write_trajectory_csv(path, times, states) -> Path:
+    """trajectory.csv of T_cw states [p; phi] (n, 6); rows without a pose (NaN) are left out."""
+    times, states = _finite(times, states)
+    np.savetxt(path, np.c_[times, states], delimiter=",", header=",".join(CSV_COLUMNS), comments="", fmt="%.9f")
+    return Path(path)
+
+
+def camera_to_world(states) -> tuple[np.ndarray, np.ndarray]:
+    """(camera centres in the world (n, 3), camera-to-world quaternions (n, 4) x y z w) of T_cw states."""
+    states = np.asarray(states, dtype=np.float64).reshape(-1, 6)
+    rotation_wc = Rotation.from_rotvec(states[:, 3:]).inv()
+    return -rotation_wc.apply(states[:, :3]), rotation_wc.as_quat()
+
+
+def write_tum_trajectory(path, times, states) -> Path:
+    """The T_cw states [p; phi] as a TUM trajectory (camera-to-world); rows without a pose are left out."""
+    times, states = _finite(times, states)
+    centres, quats = camera_to_world(states)
+    np.savetxt(path, np.c_[times, centres, quats], delimiter=" ", header=TUM_HEADER, comments="", fmt="%.9f")
+    return Path(path)
