@@ -46,7 +46,15 @@ void BindRs(py::module_& m) {
       .def_readwrite("parameter_tolerance", &RsSolverOptions::parameter_tolerance)
       .def_readwrite("num_threads", &RsSolverOptions::num_threads)
       .def_readwrite("compute_covariance", &RsSolverOptions::compute_covariance)
-      .def_readwrite("verbose", &RsSolverOptions::verbose);
+      .def_readwrite("verbose", &RsSolverOptions::verbose)
+      .def_readwrite("refine_intrinsics", &RsSolverOptions::refine_intrinsics,
+                     "refine the camera's parameters jointly (docs/formulation.md §14)")
+      .def_readwrite("intrinsics_prior_mean", &RsSolverOptions::intrinsics_prior_mean,
+                     "prior mean of the camera's n parameters (its layout)")
+      .def_readwrite("intrinsics_prior_covariance", &RsSolverOptions::intrinsics_prior_covariance,
+                     "(n, n) prior covariance; rows of fixed parameters ignored")
+      .def_readwrite("fixed_intrinsics", &RsSolverOptions::fixed_intrinsics,
+                     "indices of the camera's parameters held at their starting value");
 
   py::class_<RsSolveSummary>(m, "RsSolveSummary")
       .def_readonly("converged", &RsSolveSummary::converged)
@@ -70,7 +78,13 @@ void BindRs(py::module_& m) {
       .def_readonly("residual_px", &RsSolveSummary::residual_px)
       .def_readonly("image_velocity_px_s", &RsSolveSummary::image_velocity_px_s)
       .def_readonly("standardised_sq", &RsSolveSummary::standardised_sq)
-      .def_readonly("observation_time_s", &RsSolveSummary::observation_time_s);
+      .def_readonly("observation_time_s", &RsSolveSummary::observation_time_s)
+      .def_readonly("intrinsics", &RsSolveSummary::intrinsics,
+                    "refined camera parameters (refine_intrinsics), else empty")
+      .def_readonly("line_delay_intrinsics_covariance",
+                    &RsSolveSummary::line_delay_intrinsics_covariance,
+                    "(1 + n, 1 + n) covariance of [d, intrinsics] (refine_intrinsics), else empty")
+      .def_readonly("intrinsics_prior_cost", &RsSolveSummary::intrinsics_prior_cost);
 
   m.def(
       "solve_line_delay",

@@ -154,6 +154,14 @@ class RsSolverOptions:
     def __init__(self) -> None:
         ...
     @property
+    def fixed_intrinsics(self) -> list[int]:
+        """
+        indices of the camera's parameters held at their starting value
+        """
+    @fixed_intrinsics.setter
+    def fixed_intrinsics(self, arg0: collections.abc.Sequence[typing.SupportsInt | typing.SupportsIndex]) -> None:
+        ...
+    @property
     def function_tolerance(self) -> float:
         ...
     @function_tolerance.setter
@@ -164,6 +172,22 @@ class RsSolverOptions:
         ...
     @gradient_tolerance.setter
     def gradient_tolerance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def intrinsics_prior_covariance(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]:
+        """
+        (n, n) prior covariance; rows of fixed parameters ignored
+        """
+    @intrinsics_prior_covariance.setter
+    def intrinsics_prior_covariance(self, arg0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, n]"]) -> None:
+        ...
+    @property
+    def intrinsics_prior_mean(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        """
+        prior mean of the camera's n parameters (its layout)
+        """
+    @intrinsics_prior_mean.setter
+    def intrinsics_prior_mean(self, arg0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"]) -> None:
         ...
     @property
     def max_iterations(self) -> int:
@@ -220,6 +244,14 @@ class RsSolverOptions:
     def pixel_sigma(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
+    def refine_intrinsics(self) -> bool:
+        """
+        refine the camera's parameters jointly (docs/formulation.md §14)
+        """
+    @refine_intrinsics.setter
+    def refine_intrinsics(self, arg0: bool) -> None:
+        ...
+    @property
     def robust_loss(self) -> str:
         """
         none | huber | cauchy
@@ -250,8 +282,21 @@ class RsSolveSummary:
     def image_velocity_px_s(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]"]:
         ...
     @property
+    def intrinsics(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        """
+        refined camera parameters (refine_intrinsics), else empty
+        """
+    @property
+    def intrinsics_prior_cost(self) -> float:
+        ...
+    @property
     def iterations(self) -> int:
         ...
+    @property
+    def line_delay_intrinsics_covariance(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]:
+        """
+        (1 + n, 1 + n) covariance of [d, intrinsics] (refine_intrinsics), else empty
+        """
     @property
     def line_delay_s(self) -> float:
         ...

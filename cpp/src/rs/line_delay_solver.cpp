@@ -5,12 +5,15 @@
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <optional>
 
 #include <ceres/ceres.h>
 
 #include "rscalib/core/error.hpp"
+#include "rscalib/rs/intrinsics_prior_cost.hpp"
 #include "rscalib/rs/motion_prior_cost.hpp"
 #include "rscalib/rs/rs_reprojection_cost.hpp"
+#include "rscalib/rs/rs_reprojection_intrinsics_cost.hpp"
 #include "solver_common.hpp"
 
 namespace rscalib::rs {
@@ -89,8 +92,66 @@ void Validate(const RsObservations& obs, const camera::CameraModel& camera,
   detail::ValidateRobustLoss(options.robust_loss);
   if (!obs.uv.allFinite() || !obs.frame_time_s.allFinite() || !obs.point_w.allFinite())
     throw InputError("observations contain NaN or infinity");
-  (void)camera;
+  if (options.refine_intrinsics) {
+    const Eigen::Index n = camera.params().size();
+    if (options.intrinsics_prior_mean.size() != n || !options.intrinsics_prior_mean.allFinite())
+      throw InputError("intrinsics_prior_mean must have one finite value per camera parameter");
+    if (options.intrinsics_prior_covariance.rows() != n ||
+        options.intrinsics_prior_covariance.cols() != n)
+      throw InputError("intrinsics_prior_covariance must be n x n for the camera's n parameters");
+  }
 }
+
+// --refine-intrinsics (docs/formulation.md §14): the intrinsics parameter block (zero-padded
+// to kIntrinsicsBlockSize), its prior and the entries held constant (fixed ones, padding).
+struct IntrinsicsBlock {
+  IntrinsicsBlock(const camera::CameraModel& camera, const RsSolverOptions& options)
+      : start(camera), n(static_cast<int>(camera.params().size())) {
+    value.setZero();
+    value.head(n) = camera.params();
+    prior_mean.setZero();
+    prior_mean.head(n) = options.intrinsics_prior_mean;
+    sqrt_information = IntrinsicsPriorSqrtInformation(options.intrinsics_prior_covariance,
+                                                      options.fixed_intrinsics);
+    std::vector<bool> fixed(kIntrinsicsBlockSize, false);
+    for (int i : options.fixed_intrinsics) fixed[i] = true;
+    for (int i = n; i < kIntrinsicsBlockSize; ++i) fixed[i] = true;
+    for (int i = 0; i < kIntrinsicsBlockSize; ++i)
+      if (fixed[i]) constant.push_back(i);
+  }
+
+  // The camera with the current parameters.
+  camera::CameraModel Current() const {
+    return camera::CameraModel(start.name(), value.head(n), start.width(), start.height(),
+                               start.pixel_size_mm());
+  }
+
+  // Adds the block (with the constant entries held) and its prior to `problem`.
+  void AddTo(ceres::Problem* problem) {
+    if (static_cast<int>(constant.size()) == kIntrinsicsBlockSize) {
+      problem->AddParameterBlock(value.data(), kIntrinsicsBlockSize);
+      problem->SetParameterBlockConstant(value.data());
+    } else {
+      problem->AddParameterBlock(value.data(), kIntrinsicsBlockSize,
+                                 new ceres::SubsetManifold(kIntrinsicsBlockSize, constant));
+    }
+    problem->AddResidualBlock(IntrinsicsPriorCost::Create(prior_mean, sqrt_information), nullptr,
+                              value.data());
+  }
+
+  double PriorCost() const {
+    const Eigen::Matrix<double, kIntrinsicsBlockSize, 1> r =
+        sqrt_information * (value - prior_mean);
+    return r.squaredNorm();
+  }
+
+  const camera::CameraModel& start;
+  int n;
+  IntrinsicsVector value;
+  IntrinsicsVector prior_mean;
+  IntrinsicsMatrix sqrt_information;
+  std::vector<int> constant;
+};
 
 double PriorCost(const CubicBSpline& trajectory, const RsSolverOptions& options) {
   if (!options.use_motion_prior) return 0.0;
@@ -154,12 +215,21 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
   const auto bases = AllSpanBases(*trajectory);
   double* control = trajectory->mutable_control_points().data();
   const double* knots = trajectory->knots().data();
+  // With refine_intrinsics the weights are computed with the current intrinsics.
+  std::optional<IntrinsicsBlock> intrinsics;
+  if (options.refine_intrinsics) intrinsics.emplace(camera, options);
+  const CameraModelOf camera_model(camera);
 
   std::vector<Attachment> attached;
   std::vector<int> previous_span;
   // Re-attach every observation to the span of its current time t_i + v d.
   const auto reattach = [&]() {
-    attached = Attach(observations, camera, *trajectory, bases, *line_delay_s, options);
+    if (intrinsics) {
+      attached =
+          Attach(observations, intrinsics->Current(), *trajectory, bases, *line_delay_s, options);
+    } else {
+      attached = Attach(observations, camera, *trajectory, bases, *line_delay_s, options);
+    }
     int reattached = 0;
     for (size_t i = 0; i < previous_span.size(); ++i)
       reattached += attached[i].span != previous_span[i];
@@ -169,6 +239,7 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
     return reattached != 0;
   };
   const auto add_residuals = [&](ceres::Problem* problem, ceres::LossFunction* loss) {
+    if (intrinsics) intrinsics->AddTo(problem);
     for (Eigen::Index m = 0; m < observations.uv.rows(); ++m) {
       const Attachment& a = attached[m];
       if (!a.error.ok) continue;
@@ -177,10 +248,17 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
       const double point_w[3] = {observations.point_w(m, 0), observations.point_w(m, 1),
                                  observations.point_w(m, 2)};
       double* c0 = control + 6 * (a.span - 3);
-      problem->AddResidualBlock(
-          RsReprojectionCost::Create(basis, cam, observations.frame_time_s[m] - basis.span_start,
-                                     uv, point_w, a.error.sqrt_information),
-          loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s);
+      const double frame_offset_s = observations.frame_time_s[m] - basis.span_start;
+      if (intrinsics) {
+        problem->AddResidualBlock(
+            RsReprojectionIntrinsicsCost::Create(basis, camera_model, frame_offset_s, uv, point_w,
+                                                 a.error.sqrt_information),
+            loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s, intrinsics->value.data());
+        continue;
+      }
+      problem->AddResidualBlock(RsReprojectionCost::Create(basis, cam, frame_offset_s, uv, point_w,
+                                                           a.error.sqrt_information),
+                                loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s);
     }
     if (options.use_motion_prior) {
       for (int span = spline::kSplineDegree; span < trajectory->num_control_points(); ++span) {
@@ -191,13 +269,26 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
       }
     }
   };
-  const detail::SolveSettings settings =
+  detail::SolveSettings settings =
       detail::MakeSolveSettings(options, true, "the line-delay solve failed: ");
+  if (intrinsics)
+    settings.joint_covariance_blocks = {{intrinsics->value.data(), kIntrinsicsBlockSize}};
   const detail::SolveResult result =
       detail::SolveWithCovariance(settings, line_delay_s, started, reattach, add_residuals);
   result.CopyTo(&summary);
 
-  attached = Attach(observations, camera, *trajectory, bases, *line_delay_s, options);
+  if (intrinsics) {
+    const camera::CameraModel refined = intrinsics->Current();
+    attached = Attach(observations, refined, *trajectory, bases, *line_delay_s, options);
+    summary.intrinsics = refined.params();
+    const int n = intrinsics->n;
+    if (result.joint_covariance.rows() >= 1 + n)
+      summary.line_delay_intrinsics_covariance =
+          result.joint_covariance.topLeftCorner(1 + n, 1 + n);
+    summary.intrinsics_prior_cost = intrinsics->PriorCost();
+  } else {
+    attached = Attach(observations, camera, *trajectory, bases, *line_delay_s, options);
+  }
   FillStatistics(*trajectory, attached, options, &summary);
   return summary;
 }

@@ -42,6 +42,45 @@ std::optional<double> ScalarVariance(ceres::Problem* problem, const double* para
   return variance;
 }
 
+// Covariance of [d, blocks...] (ambient sizes, in order): Ceres' Covariance, sparse QR.
+// nullopt when Ceres cannot compute it or it is not finite.
+std::optional<Eigen::MatrixXd> JointCovariance(
+    ceres::Problem* problem, const double* line_delay,
+    const std::vector<std::pair<const double*, int>>& blocks, int num_threads) {
+  ceres::Covariance::Options covariance_options;
+  covariance_options.num_threads = std::max(1, num_threads);
+  covariance_options.algorithm_type = ceres::SPARSE_QR;
+  ceres::Covariance covariance(covariance_options);
+  std::vector<const double*> all = {line_delay};
+  std::vector<int> sizes = {1};
+  for (const auto& [block, size] : blocks) {
+    all.push_back(block);
+    sizes.push_back(size);
+  }
+  std::vector<std::pair<const double*, const double*>> pairs;
+  for (size_t i = 0; i < all.size(); ++i)
+    for (size_t j = i; j < all.size(); ++j) pairs.emplace_back(all[i], all[j]);
+  if (!covariance.Compute(pairs, problem)) return std::nullopt;
+  int total = 0;
+  for (int size : sizes) total += size;
+  Eigen::MatrixXd out(total, total);
+  int row = 0;
+  for (size_t i = 0; i < all.size(); ++i) {
+    int col = row;
+    for (size_t j = i; j < all.size(); ++j) {
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> block(sizes[i],
+                                                                                   sizes[j]);
+      covariance.GetCovarianceBlock(all[i], all[j], block.data());
+      out.block(row, col, sizes[i], sizes[j]) = block;
+      out.block(col, row, sizes[j], sizes[i]) = block.transpose();
+      col += sizes[j];
+    }
+    row += sizes[i];
+  }
+  if (!out.allFinite() || !(out(0, 0) >= 0.0)) return std::nullopt;
+  return out;
+}
+
 }  // namespace
 
 void ValidateNoiseOptions(double pixel_sigma, double max_rs_gain) {
@@ -116,7 +155,16 @@ SolveResult SolveWithCovariance(const SolveSettings& settings, double* line_dela
 
   if (settings.compute_covariance && settings.estimate_line_delay && problem) {
     const auto covariance_started = Clock::now();
-    if (const auto variance = ScalarVariance(problem.get(), line_delay_s, settings.num_threads)) {
+    if (!settings.joint_covariance_blocks.empty()) {
+      if (const auto joint =
+              JointCovariance(problem.get(), line_delay_s, settings.joint_covariance_blocks,
+                              settings.num_threads)) {
+        result.joint_covariance = *joint;
+        result.line_delay_std_s = std::sqrt((*joint)(0, 0));
+        result.covariance_ok = true;
+      }
+    } else if (const auto variance =
+                   ScalarVariance(problem.get(), line_delay_s, settings.num_threads)) {
       result.line_delay_std_s = std::sqrt(*variance);
       result.covariance_ok = true;
     }

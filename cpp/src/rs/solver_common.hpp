@@ -14,6 +14,7 @@
 #include <functional>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -41,6 +42,9 @@ struct SolveSettings {
   bool wait_for_line_delay;
   // Start of the InputError thrown when Ceres reports a failure.
   std::string failure_message;
+  // Optional: further parameter blocks (pointer, ambient size) whose covariance with d is
+  // wanted (SolveResult::joint_covariance). Empty: only the variance of d (the default path).
+  std::vector<std::pair<const double*, int>> joint_covariance_blocks;
 };
 
 // From the options both solvers have (RsSolverOptions, LinearInterpOptions): DOGLEG on
@@ -141,6 +145,9 @@ struct SolveResult {
   double line_delay_std_s = std::numeric_limits<double>::infinity();
   bool covariance_ok = false;
   double covariance_time_s = 0.0;
+  // With SolveSettings::joint_covariance_blocks: the covariance of [d, those blocks] (ambient
+  // sizes, in order); empty when not asked for or not computable.
+  Eigen::MatrixXd joint_covariance;
 
   template <typename Summary>
   void CopyTo(Summary* summary) const {

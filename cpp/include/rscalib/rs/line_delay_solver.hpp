@@ -45,6 +45,14 @@ struct RsSolverOptions {
   int num_threads = 2;
   bool compute_covariance = true;
   bool verbose = false;
+  // Joint refinement of the intrinsics (docs/formulation.md §14). false: the camera is known
+  // (the path of every other option, unchanged). true: the camera's parameters (its layout,
+  // docs/conventions.md) are a parameter block, started at the camera passed to the solver and
+  // pulled towards intrinsics_prior_mean by the prior N(mean, covariance) on the free ones.
+  bool refine_intrinsics = false;
+  Eigen::VectorXd intrinsics_prior_mean;        // (n) the model's n parameters
+  Eigen::MatrixXd intrinsics_prior_covariance;  // (n, n); rows of fixed parameters ignored
+  std::vector<int> fixed_intrinsics;            // indices held at the starting value
 };
 
 struct RsSolveSummary {
@@ -72,9 +80,16 @@ struct RsSolveSummary {
   Eigen::MatrixX2d image_velocity_px_s;  // (M, 2) d(uv)/dt at the final estimate, NaN if not used
   Eigen::VectorXd standardised_sq;
   Eigen::VectorXd observation_time_s;
+  // refine_intrinsics only (empty otherwise): the refined parameters (n, the model's layout),
+  // the covariance of [d, intrinsics] ((1 + n) x (1 + n), s/row and the layout's units; zero
+  // rows for fixed parameters; empty when not computed) and the prior's cost.
+  Eigen::VectorXd intrinsics;
+  Eigen::MatrixXd line_delay_intrinsics_covariance;
+  double intrinsics_prior_cost = 0.0;
 };
 
-// Refines `trajectory` (6-D pose spline [p; phi], T_cw) and `line_delay_s` in place.
+// Refines `trajectory` (6-D pose spline [p; phi], T_cw) and `line_delay_s` in place (and, with
+// options.refine_intrinsics, the intrinsics starting from `camera`'s: summary.intrinsics).
 RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::CameraModel& camera,
                               spline::CubicBSpline* trajectory, double* line_delay_s,
                               const RsSolverOptions& options);
