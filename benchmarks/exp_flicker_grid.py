@@ -106,6 +106,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", type=int, default=56)
     parser.add_argument("--seed0", type=int, default=1300, help="fresh seeds: change it for new cases")
+    parser.add_argument("--results", type=Path, default=RESULTS, help="where the JSON goes")
     args = parser.parse_args()
     info = machine_info()
     started = time.perf_counter()
@@ -122,7 +123,7 @@ def main() -> None:
     settings = dict(cases=args.cases, seed0=args.seed0, command=" ".join([".venv/bin/python"] + sys.argv),
                     total_seconds=time.perf_counter() - started)
     clean = [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in r.items()} for r in rows]
-    write_results(RESULTS, "exp_flicker_grid", info, settings, {"summary": summary, "per_case": clean}, text)
+    write_results(args.results, "exp_flicker_grid", info, settings, {"summary": summary, "per_case": clean}, text)
     print(summary)
     print(text)
 

@@ -65,7 +65,84 @@ def add_parser(sub) -> None:
                    help="instead of a target video: a hand-held walk through a textured room, seen by the "
                         "self-calibration paper's 320x240 camera (PNG frames, timestamps.txt, truth.json in OUT), "
                         "for `rscalib selfcalib OUT --pixel-size-mm 0.0112`; uses --duration, --fps, --seed, --noise")
+    led = p.add_argument_group(
+        "LED / flicker footage (--led)",
+        "Instead of a target video: frames of a lamp or diffuser lit by a flickering light, as real LED "
+        "recordings look (square wave with a duty cycle, clipping, vignetting, a lamp filling part of the frame, "
+        "overlays, JPEG), for `rscalib flicker OUT --frequency HZ`. Uses --flicker-hz (required), --line-delay, "
+        "--size, --fps, --exposure, --noise, --seed; frames from --duration unless --frames is given.")
+    led.add_argument("--led", action="store_true", help="render LED / flicker footage (writes frames, "
+                     "timestamps.txt and truth.json in OUT)")
+    led.add_argument("--frames", type=int, default=None, metavar="N", help="number of frames (e.g. 1 for a still)")
+    led.add_argument("--waveform", choices=["square", "sine"], default="square", help="light waveform (square)")
+    led.add_argument("--duty", type=float, default=0.5, help="fraction of each period the light is on (0.5)")
+    led.add_argument("--off-level", type=float, default=0.0, metavar="L",
+                     help="light level when off, relative to on (0)")
+    led.add_argument("--lamp", choices=["flat", "disk", "partial"], default="flat",
+                     help="flat: the light fills the frame; disk: a lit disk on a dark surround; partial: the "
+                          "light covers the left part of the frame (flat)")
+    led.add_argument("--brightness", type=float, default=0.8,
+                     help="level of the light when on, fraction of full scale; above 1 the bands clip (0.8)")
+    led.add_argument("--vignetting", type=float, default=0.0, help="relative fall-off at the corners (0)")
+    led.add_argument("--overlay", default=None, metavar="TEXT", help="a text overlay and a box drawn on the frames")
+    led.add_argument("--blob", action="store_true", help="an out-of-focus bright blob on the right")
+    led.add_argument("--jpeg-quality", type=int, default=None, metavar="Q",
+                     help="write JPEG frames at quality Q (default: lossless PNG)")
+    led.add_argument("--readout", choices=["top-to-bottom", "bottom-to-top"], default="top-to-bottom",
+                     help="sensor readout direction; bottom-to-top gives a negative line delay (top-to-bottom)")
+    led.add_argument("--no-timestamps", action="store_true", help="do not write timestamps.txt (frames of "
+                     "unknown times)")
     p.set_defaults(func=run)
+
+
+def run_led(args: argparse.Namespace) -> int:
+    """`--led`: LED / flicker footage (rscalib.sim.flicker_light) with its truth."""
+    import numpy as np
+
+    from ..sim.flicker_light import FlickerLight, FlickerScene, write_flicker_sequence
+
+    if args.flicker_hz is None:
+        raise InputError("--led needs --flicker-hz (the light's intensity frequency)")
+    match = re.fullmatch(r"(\d+)x(\d+)", args.size)
+    if not match:
+        raise InputError(f"--size must be WIDTHxHEIGHT (got {args.size!r})")
+    size = (int(match.group(1)), int(match.group(2)))
+    if not (0 < size[0] <= 20000 and 16 <= size[1] <= 20000):
+        raise InputError(f"--size {args.size}: width 1..20000 and height 16..20000")
+    if not (np.isfinite(args.fps) and args.fps > 0):
+        raise InputError("--fps must be positive")
+    count = args.frames if args.frames is not None else int(round(args.duration * args.fps))
+    if not 1 <= count <= 10000:
+        raise InputError(f"{count} frames: give 1 to 10000 (--frames or --duration x --fps)")
+    if not (np.isfinite(args.line_delay) and args.line_delay > 0):
+        raise InputError("--line-delay must be positive (use --readout bottom-to-top for the other direction)")
+    if not (0 < args.duty < 1):
+        raise InputError(f"--duty must be in (0, 1) (got {args.duty})")
+    for name in ("brightness", "vignetting", "exposure", "noise"):
+        value = getattr(args, name)
+        if not (np.isfinite(value) and value >= 0):
+            raise InputError(f"--{name} must be a finite number >= 0 (got {value})")
+    if args.jpeg_quality is not None and not 1 <= args.jpeg_quality <= 100:
+        raise InputError("--jpeg-quality must be 1..100")
+    d = args.line_delay * (-1.0 if args.readout == "bottom-to-top" else 1.0)
+    light = FlickerLight(args.flicker_hz, duty=args.duty, off_level=args.off_level, waveform=args.waveform,
+                         phase=args.flicker_phase / (2 * np.pi))
+    scene = FlickerScene(lamp=args.lamp, brightness=args.brightness, vignetting=args.vignetting,
+                         overlay_text=args.overlay, blob=args.blob)
+    times = np.arange(count) / args.fps
+    truth = write_flicker_sequence(args.out, light, scene, size, d, times, exposure_s=args.exposure,
+                                   noise=args.noise, jpeg_quality=args.jpeg_quality, seed=args.seed,
+                                   timestamps=not args.no_timestamps)
+    if not args.quiet:
+        period_rows = 1.0 / (args.flicker_hz * abs(d))
+        print(f"rscalib simulate --led: {count} frame(s) {size[0]}x{size[1]}, {args.flicker_hz:g} Hz "
+              f"{args.waveform} light (duty {args.duty:g}), line delay {d * 1e6:.4f} us/row ({args.readout}), "
+              f"bands every {period_rows:.2f} rows ({size[1] / period_rows:.2f} per frame), "
+              f"{truth['clipped_fraction']:.0%} of pixels clipped")
+        print(f"  wrote {'JPEG' if args.jpeg_quality else 'PNG'} frames"
+              + ("" if args.no_timestamps else ", timestamps.txt") + f" and truth.json to {args.out}")
+        print(f"  try: rscalib flicker {args.out} --frequency {args.flicker_hz:g} --out flicker_result")
+    return EXIT_OK
 
 
 def run_scene(args: argparse.Namespace) -> int:
@@ -88,8 +165,12 @@ def run_scene(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     from ..sim.target_video import render_video
 
+    if args.scene and args.led:
+        raise InputError("give --scene or --led, not both")
     if args.scene:
         return run_scene(args)
+    if args.led:
+        return run_led(args)
     if args.no_video and not args.frames_dir:
         raise InputError("--no-video needs --frames-dir (nothing would be written)")
     if args.workers is not None and args.workers < 1:

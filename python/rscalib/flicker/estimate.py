@@ -49,11 +49,14 @@ MOVING_BLOCK = 4                 # frames per block when the scene may move (det
 SPREAD_DISAGREEMENT = 2.0        # fit vs spread uncertainty ratio that earns a warning
 KMAX = 12                        # harmonics of the band waveform (square-ish: duty cycle, clipped edges)
 HARMONIC_NU_MAX = 0.45           # ... all below this many cycles per row
+FUNDAMENTAL_F_AMBIGUOUS = 100.0  # ... but at or above this F with a small share: refuse (either may be the bands)
 FUNDAMENTAL_F = 4.0              # nested F below this: a sub-harmonic's extra terms explain nothing
 SUBHARMONIC_SHARE = 0.1          # ... or less than this share of what the fundamental's harmonics explain
 PHASE_TOLERANCE = 0.01           # flicker phases (cycles) closer than this count as one
 PHASE_RMS_MAX = 0.05             # phase drift: frames' own band phases vs the timestamps' prediction (cycles rms)
 RESIDUAL_PEAK_MAX = 0.25         # residual periodogram peak off the fitted harmonics over the bands' peak
+EDGE_QUANTISATION_ROWS = math.sqrt(2.0 / 12.0)  # σ of a period's span when both end edges are sampled to ±0.5 row
+EDGE_MIN_CONTRAST = 10.0         # band contrast in noise σ needed to see how sharp the edges are
 AGREEMENT_SIGMAS = 3.0           # spectrum and phase drift must agree within this many σ
 BLACK_CLAMP = 0.01                # log profiles are clamped here (fraction of the brightest row)
 COARSE_FRAMES = 120              # consecutive frames used for the phase-drift grid
@@ -218,7 +221,7 @@ def _refine_frames(data: _Data, nu0: float, k_count: int, half_width: float, lo:
     return (float(res.x), float(res.fun)) if res.fun <= total[b] else (float(grid[b]), float(total[b]))
 
 
-def _fundamental(data: _Data, nu: float, k_count: int, rss: float, dof: int) -> tuple[float, list]:
+def _fundamental(data: _Data, nu: float, k_count: int, rss: float, dof: int) -> tuple[float, list, Optional[str]]:
     """Climb from a candidate to the fundamental it may be a sub-harmonic of: ν·m replaces ν when
     the harmonics of ν that are not multiples of m add little: a nested F test below FUNDAMENTAL_F,
     or less than SUBHARMONIC_SHARE of what the harmonics of ν·m explain (scene structure, which any
@@ -238,12 +241,17 @@ def _fundamental(data: _Data, nu: float, k_count: int, rss: float, dof: int) -> 
             f_stat = ((rss_sub - rss) / extra) / sigma2
             share = (rss_sub - rss) / max(null - rss_sub, 1e-300)
             steps.append({"from_nu": nu, "m": m, "f": float(f_stat), "share": float(share)})
+            if f_stat >= FUNDAMENTAL_F_AMBIGUOUS and share < SUBHARMONIC_SHARE:
+                # ν's own harmonics are far above the noise, yet small beside those of ν·m: either
+                # could be the bands (a clipped wave whose dark rows carry little weight)
+                return nu, steps, (f"the bands repeat every {1 / nu:.1f} or every {1 / (m * nu):.1f} rows: "
+                                   f"the profile cannot tell which (F {f_stat:.0f}, share {share:.2f})")
             if f_stat < FUNDAMENTAL_F or share < SUBHARMONIC_SHARE:
                 nu, k_count = m * nu, _harmonics_at(m * nu, k_count)
                 rss = float(np.sum(_frame_rss(data, nu, k_count)))
                 changed = True
                 break
-    return nu, steps
+    return nu, steps, None
 
 
 def _segment_chi2(data: _Data, nu: float, k_count: int) -> float:
@@ -272,6 +280,26 @@ def _segment_chi2(data: _Data, nu: float, k_count: int) -> float:
     values, weights = np.array(values), 1.0 / np.array(variances)
     mean = float(np.sum(weights * values) / np.sum(weights))
     return float(np.sum(weights * (values - mean) ** 2) / (len(values) - 1))
+
+
+def _edge_width_rows(data: _Data, nu: float, k_count: int, sigma2: float) -> float:
+    """Mean width (rows) of the bands' edges: 2 × rows in the middle half of the contrast per edge
+    (a ramp w rows wide puts w/2 rows there). Infinite (edges resolved) when the contrast is below
+    EDGE_MIN_CONTRAST noise σ (then noise, not sampling, limits the edges) or the wave has no edges."""
+    used = data.sw > 0
+    model = _frame_fit(data, nu, k_count)[:, used]
+    values = (data.yp[:, used] / data.sw[used])
+    noise = math.sqrt(max(sigma2, 0.0)) / float(np.sqrt(np.mean(data.w[used])))
+    cycles = abs(nu) * (float(np.ptp(data.v)) + 1.0)
+    widths = []
+    for m, y in zip(model, values):
+        lo, hi = np.percentile(m, [5, 95])
+        contrast = hi - lo
+        if not contrast > EDGE_MIN_CONTRAST * noise or cycles < 1:
+            return float("inf")
+        middle = np.count_nonzero((y > lo + 0.25 * contrast) & (y < hi - 0.25 * contrast))
+        widths.append(2.0 * middle / (2.0 * cycles))
+    return float(np.mean(widths)) if widths else float("inf")
 
 
 def _spectrum_estimate(data: _Data, nu_hi: float, kmax: int, min_cycles: float) -> dict:
@@ -320,7 +348,10 @@ def _spectrum_estimate(data: _Data, nu_hi: float, kmax: int, min_cycles: float) 
                             + math.log(max(n_eff, 2)) * data.frames * 2 * c[2])
     dof = max(1, n_eff - data.nuisance_dof() - data.frames * 2 * k_common - 1)
     # the best candidate may be a sub-harmonic (its extra terms fit noise): climb to the fundamental
-    nu_f, steps = _fundamental(data, nu, k_common, rss, dof)
+    nu_f, steps, ambiguous = _fundamental(data, nu, k_common, rss, dof)
+    if ambiguous:
+        out.update(nu=nu_f, reason=ambiguous, fundamental_tests=steps)
+        return out
     k_count = _harmonics_at(nu_f, kmax)
     nu, rss = _refine_frames(data, nu_f, k_count, 0.1 / span, nu_floor * 0.5)
     dof = max(1, n_eff - data.nuisance_dof() - data.frames * 2 * k_count - 1)
@@ -355,6 +386,12 @@ def _spectrum_estimate(data: _Data, nu_hi: float, kmax: int, min_cycles: float) 
     segment_chi2 = _segment_chi2(data, nu, k_count)
     if segment_chi2 > 1.0 and math.isfinite(std_fit):
         std_fit *= math.sqrt(segment_chi2)
+    # edges sharper than a row are sampled, not measured: their quantisation does not average out
+    # within a frame (formulation §12), only over frames with different flicker phases
+    edge_width = _edge_width_rows(data, nu, k_count, sigma2)
+    std_quantisation = nu * EDGE_QUANTISATION_ROWS * max(0.0, 1.0 - edge_width) / span / math.sqrt(data.frames)
+    if math.isfinite(std_fit):
+        std_fit = math.hypot(std_fit, std_quantisation)
     delta_chi2 = (data.null_rss() - rss) / sigma2
     penalty = math.log(max(n_eff, 2)) * data.frames * 2 * k_count
     # Are these bands a harmonic of bands with fewer periods than the spectrum searches? Then ν/m
@@ -378,7 +415,8 @@ def _spectrum_estimate(data: _Data, nu_hi: float, kmax: int, min_cycles: float) 
     out.update(ok=True, nu=nu, std_fit_nu=std_fit, std_spread_nu=std_spread, per_frame_nu=per_frame_nu,
                spread_label="frame", delta_chi2=float(delta_chi2), peak_ratio=ratio, harmonics=k_count,
                rss=rss, sigma2=sigma2, candidates_nu=[c[0] for c in candidates], fundamental_tests=steps,
-               segment_chi2=segment_chi2)
+               segment_chi2=segment_chi2, edge_width_rows=edge_width,
+               std_quantisation_nu=std_quantisation)
     # the same light in every frame: the bands' fundamental amplitude may not vary much between frames
     # (a lock on a harmonic of a slower light sees an edge in some frames and none in others)
     amplitude_spread = float("nan")
@@ -388,8 +426,11 @@ def _spectrum_estimate(data: _Data, nu_hi: float, kmax: int, min_cycles: float) 
         amplitude = np.hypot(free[0], free[1])
         amplitude_spread = float(np.std(amplitude) / max(np.mean(amplitude), 1e-300))
         out["amplitude_spread"] = amplitude_spread
-    if nu * span < SQUARE_MIN_CYCLES:
-        out.update(ok=False, reason=f"{nu * span:.2f} periods per frame: too few for the spectrum alone "
+    # periods seen, not spanned: rows left out (unlit, overlays) between two stretches of bands
+    # let waves of many periods join them
+    seen = nu * min(span, float(data.rows_used))
+    if seen < SQUARE_MIN_CYCLES:
+        out.update(ok=False, reason=f"{seen:.2f} periods in the rows used: too few for the spectrum alone "
                                     f"(needs {SQUARE_MIN_CYCLES:g} to tell a band period from a harmonic of a "
                                     "slower light)")
     elif amplitude_spread > MAX_AMPLITUDE_SPREAD:
@@ -748,7 +789,9 @@ def estimate_line_delay_flicker(frames: Any, frequency_hz: float, timestamps_s: 
     top = float(np.max(median))
     if not top > 0:
         raise InputError("the frames are black in the region used")
-    usable = lit & (median > 0.01 * top)
+    # a dark band is data (the light is off there), weighted by the clamp like any dark row: left
+    # out, a clipped wave at ν and its harmonic 2ν explain the bright rows alike
+    usable = lit
     if np.count_nonzero(usable) < MIN_ROWS:
         raise InputError(f"only {np.count_nonzero(usable)} rows are lit; need {MIN_ROWS}")
     floor = BLACK_CLAMP * top
@@ -813,7 +856,7 @@ def estimate_line_delay_flicker(frames: Any, frequency_hz: float, timestamps_s: 
         if "alias_nu" in e:
             entry["alias_line_delay_s"] = e["alias_nu"] / f
         for key in ("ambiguity_delta_chi2", "distinct_phases", "joint_vs_free_f", "phase_rms_cycles", "peak_ratio",
-                    "segment_chi2", "amplitude_spread"):
+                    "segment_chi2", "amplitude_spread", "edge_width_rows"):
             if e.get(key) is not None:
                 entry[key] = e[key]
         for key in ("candidates_nu",):

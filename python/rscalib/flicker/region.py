@@ -96,6 +96,10 @@ def choose_region(profiles: RowProfiles, auto: bool = True) -> dict:
             note = f"{int(keep.sum())} of {count} column strips show the same bands"
         else:
             note = "no strip shows clear bands (fewer than 2 periods per frame?): every lit strip used"
+    if np.isfinite(peak_nu) and peak_nu > 0 and 1.0 / peak_nu > window:
+        # a dark band is the light off, not an unlit part of the scene: look a whole period for light
+        envelope = maximum_filter1d(brightest, size=2 * int(np.ceil(1.0 / peak_nu)) + 1, axis=0, mode="nearest")
+        lit = envelope > black + LIT_FRACTION * (bright - black) if bright > black else lit
     use = lit & keep[None, :]
     # per-strip level relative to the strips' median profile, and cells that stand out from it
     masked = np.zeros_like(use)
@@ -115,7 +119,12 @@ def choose_region(profiles: RowProfiles, auto: bool = True) -> dict:
             trend = median_filter(np.where(use, dev, 0.0), size=(2 * window + 1, 1), mode="nearest")
             resid = np.where(use & np.isfinite(dev), dev - trend, np.nan)
             mad = float(np.nanmedian(np.abs(resid - np.nanmedian(resid)))) if np.any(np.isfinite(resid)) else 0.0
-            if mad > 0:
+            if mad == 0 and profiles.strip_clipped is not None:
+                # most cells clipped alike: judge by the spread of the unclipped ones
+                spread = np.where(profiles.strip_clipped, np.nan, resid)
+                if np.any(np.isfinite(spread)):
+                    mad = float(np.nanmedian(np.abs(spread - np.nanmedian(spread))))
+            if np.any(np.isfinite(resid)):
                 masked = np.isfinite(resid) & (np.abs(resid) > OUTLIER_MADS * 1.4826 * mad + 0.02)
                 masked = binary_dilation(masked, structure=np.ones((5, 1), bool)) & use
                 use = use & ~masked

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["FlickerLight", "FlickerScene", "render_flicker_frames"]
+__all__ = ["FlickerLight", "FlickerScene", "render_flicker_frames", "write_flicker_sequence"]
 
 
 @dataclass
@@ -159,3 +159,34 @@ def render_flicker_frames(light: FlickerLight, scene: FlickerScene, size: Sequen
              "jpeg_quality": jpeg_quality, "scene": dict(scene.__dict__),
              "clipped_fraction": float(np.mean([(f >= 255).mean() + (f == 0).mean() for f in frames]))}
     return np.array(frames), truth
+
+
+def write_flicker_sequence(out_dir, light: FlickerLight, scene: FlickerScene, size: Sequence[int],
+                           line_delay_s: float, frame_times_s: Sequence[float], exposure_s: float = 0.0,
+                           noise: float = 1.0, jpeg_quality: Optional[int] = None, seed: int = 0,
+                           timestamps: bool = True) -> dict:
+    """Render with :func:`render_flicker_frames` and write ``frame_000000.png`` … (``.jpg`` when
+    ``jpeg_quality`` is given: the file holds the compressed bytes), ``timestamps.txt`` (row-0 times,
+    seconds; left out when ``timestamps`` is False, as for frames whose times are unknown) and
+    ``truth.json``. Returns the truth."""
+    import json
+    from pathlib import Path
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    frames, truth = render_flicker_frames(light, scene, size, line_delay_s, frame_times_s, exposure_s=exposure_s,
+                                          noise=noise, jpeg_quality=None, seed=seed)
+    for stale in [*out.glob("frame_*.png"), *out.glob("frame_*.jpg"), out / "timestamps.txt"]:
+        stale.unlink(missing_ok=True)
+    for i, frame in enumerate(frames):
+        if jpeg_quality is None:
+            cv2.imwrite(str(out / f"frame_{i:06d}.png"), frame)
+        else:
+            cv2.imwrite(str(out / f"frame_{i:06d}.jpg"), frame, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
+    truth["jpeg_quality"] = jpeg_quality
+    times = np.asarray(frame_times_s, dtype=np.float64)
+    if timestamps:
+        (out / "timestamps.txt").write_text("".join(f"{t:.9f}\n" for t in times))
+    truth["timestamps_written"] = bool(timestamps)
+    (out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    return truth

@@ -149,3 +149,98 @@ def test_real_nikon_z9_frame(tmp_path):
     assert result["determined"]
     assert result["readout_time_s"] == pytest.approx(14.42e-3, rel=5e-3)
     assert result["region"]["mode"] == "auto" and result["region"]["strips_used"] < 32
+
+
+def test_edges_sharper_than_a_row_widen_the_single_frame_bound():
+    # grid case 32 (seed0 1300): one crisp frame (exposure 0.15 row), 12.8 periods; the edges are
+    # sampled to whole rows, which biased d by 0.068 % against a white-noise sigma of 0.012 % (5.5 sigma)
+    d = 9.1946e-06
+    light = FlickerLight(2173.8656, duty=0.456, phase=0.416)
+    scene = FlickerScene(lamp="partial", coverage=0.512, brightness=2.64, black_level=0.031, vignetting=0.074,
+                         blob=True, texture=0.144)
+    frames, _ = render_flicker_frames(light, scene, (480, 640), d, [0.37], exposure_s=1.384e-6, noise=1.85,
+                                      jpeg_quality=92, seed=1300032)
+    result = estimate_line_delay_flicker(frames[0], 2173.8656)
+    within(result, d, 2e-3)
+    assert result.estimates["spectrum"]["edge_width_rows"] < 1.0
+    # a long exposure ramps the edges over rows: no quantisation term, the sigma stays the fit's
+    frames, _ = render_flicker_frames(light, scene, (480, 640), d, [0.37], exposure_s=40e-6, noise=1.85, seed=2)
+    soft = estimate_line_delay_flicker(frames[0], 2173.8656)
+    within(soft, d, 1e-3)
+    assert soft.estimates["spectrum"]["edge_width_rows"] > 1.0
+
+
+@pytest.mark.parametrize("extra, frames_written, has_times", [
+    (["--frames", "1", "--size", "640x480", "--lamp", "disk", "--vignetting", "0.3", "--brightness", "1.5",
+      "--jpeg-quality", "90", "--overlay", "ISO 100", "--blob", "--exposure", "20us"], 1, True),
+    (["--duration", "2", "--readout", "bottom-to-top", "--duty", "0.3", "--lamp", "partial", "--brightness",
+      "1.3", "--flicker-hz", "100"], 60, True),
+    (["--frames", "12", "--size", "16x864", "--exposure", "36us", "--brightness", "3", "--no-timestamps",
+      "--flicker-hz", "5000", "--line-delay", "9.209us"], 12, False),
+])
+def test_simulate_led_footage_round_trip(tmp_path, extra, frames_written, has_times):
+    out = tmp_path / "led"
+    assert main(["simulate", "--led", "--out", str(out), "--flicker-hz", "1000", "--seed", "3", "--quiet"]
+                + extra) == 0
+    truth = json.loads((out / "truth.json").read_text())
+    assert len(list(out.glob("frame_*"))) == frames_written
+    assert (out / "timestamps.txt").exists() == has_times
+    assert truth["generator"] == "rscalib.sim.flicker_light"
+    frequency = truth["frequency_hz"]
+    code = main(["flicker", str(out), "--frequency", f"{frequency:g}", "--out", str(tmp_path / "r"), "--quiet"])
+    result = json.loads((tmp_path / "r" / "result.json").read_text())
+    assert code == 0 and result["determined"], result["reason"]
+    d_true = truth["line_delay_s"]
+    estimate = result["line_delay_s"] if result["direction_determined"] else abs(result["line_delay_s"])
+    reference = d_true if result["direction_determined"] else abs(d_true)
+    assert abs(estimate - reference) < 3 * result["line_delay_std_s"]
+    assert abs(estimate - reference) < 2e-3 * abs(d_true)
+    if "bottom-to-top" in extra:
+        assert d_true < 0 and result["direction_determined"] and result["line_delay_s"] < 0
+
+
+@pytest.mark.parametrize("args, reason", [
+    (["--led"], "--flicker-hz"),
+    (["--led", "--flicker-hz", "100", "--duty", "1.5"], "--duty"),
+    (["--led", "--flicker-hz", "100", "--frames", "0"], "frames"),
+    (["--led", "--scene", "--flicker-hz", "100"], "not both"),
+])
+def test_simulate_led_bad_input_exit_2(tmp_path, capsys, args, reason):
+    assert main(["simulate", "--out", str(tmp_path / "x"), "--quiet"] + args) == 2
+    err = capsys.readouterr().err.strip()
+    assert reason in err and len(err.splitlines()) == 1
+
+
+def right_or_refused(result, truth):
+    if result.determined:
+        assert abs(abs(result.line_delay_s) - abs(truth)) < 3 * result.line_delay_std_s
+    else:
+        assert result.reason
+
+
+def test_two_ramps_across_a_dark_gap_are_not_bands():
+    # fresh-seed grid case 2600/16: 0.58 periods per frame, the light on only at the top and bottom of
+    # a disk; rows between are dark, and the two ramps were fitted as 3.9 periods (x5.7, 845 sigma)
+    d = 2.553865e-05
+    light = FlickerLight(31.6843, duty=0.3026, phase=0.7458)
+    scene = FlickerScene(lamp="disk", lamp_radius=0.6716, brightness=2.0116, black_level=0.0297, vignetting=0.0468)
+    frames, _ = render_flicker_frames(light, scene, (320, 720), d, [0.33125], exposure_s=6.894e-3, noise=2.57,
+                                      jpeg_quality=74, seed=2600016)
+    result = estimate_line_delay_flicker(frames[0], 31.6843)
+    right_or_refused(result, d)
+    assert not result.determined  # well under one period: the spectrum alone cannot tell
+
+
+def test_long_dark_bands_are_data_not_unlit_scene():
+    # fresh-seed grid case 2600/98: a clipped 3-period wave, dark bands longer than the lit-cell window
+    # and an overlay box in a dark band; dropped dark rows let 2x the period fit the bright rows (x2,
+    # 1950 sigma). Now the dark rows count, the box is masked, and the estimate is right or refused.
+    d = 9.7476e-06
+    light = FlickerLight(428.6505, duty=0.2794, phase=0.7822)
+    scene = FlickerScene(lamp="disk", lamp_radius=0.6986, brightness=2.1718, black_level=0.00077,
+                         vignetting=0.0475, overlay_text="LED TEST 1/2000", texture=0.1165)
+    frames, _ = render_flicker_frames(light, scene, (320, 720), d, [0.01625], exposure_s=3.094e-4, noise=0.668,
+                                      seed=2600098)
+    result = estimate_line_delay_flicker(frames[0], 428.6505)
+    right_or_refused(result, d)
+    assert result.region["cells_unlit"] == 0
