@@ -78,6 +78,14 @@ def add_parser(sub) -> None:
                                "image motion during the readout stretches it")
     advanced.add_argument("--no-motion-prior", action="store_true",
                           help="spline only: no penalty on the trajectory's acceleration")
+    advanced.add_argument("--refine-intrinsics", action="store_true",
+                          help="spline only: refine focal lengths, principal point and distortion jointly with the "
+                               "trajectory and the line delay, with the camera file as a prior; result.json gets "
+                               "the covariance of the line delay with the intrinsics (docs/formulation.md §14)")
+    advanced.add_argument("--intrinsics-prior", default=None, metavar="RESULT_JSON",
+                          help="with --refine-intrinsics: the `rscalib intrinsics` result.json whose standard "
+                               "deviations are the prior (default: sigma_f 2 %%, sigma_c 10 px, the distortion's "
+                               "default sigma)")
     p.set_defaults(func=run_linedelay)
 
     q = sub.add_parser("localize", help="continuous-time trajectory with a known line delay, vs per-frame PnP",
@@ -112,6 +120,15 @@ def _check_flags(args) -> None:
         value = getattr(args, flag, None)
         if value is not None and not math.isfinite(value):
             raise InputError(f"--{flag} must be a number of seconds")
+
+
+def _refine_options(args) -> dict:
+    """--refine-intrinsics and its prior, only when given (the default call is unchanged)."""
+    if getattr(args, "intrinsics_prior", None) is not None and not args.refine_intrinsics:
+        raise InputError("--intrinsics-prior needs --refine-intrinsics")
+    if not getattr(args, "refine_intrinsics", False):
+        return {}
+    return {"refine_intrinsics": True, "intrinsics_prior": args.intrinsics_prior}
 
 
 def _say(args, text: str) -> None:
@@ -186,7 +203,7 @@ def _run_linedelay(args) -> int:
                           use_motion_prior=not args.no_motion_prior, start_s=args.start, end_s=args.end,
                           readout=args.readout, self_check=not args.no_self_check,
                           min_segment_s=None if args.min_segment_ms is None else args.min_segment_ms * 1e-3,
-                          noise_model=args.noise_model, **_common_options(args, solving))
+                          noise_model=args.noise_model, **_refine_options(args), **_common_options(args, solving))
     summary = write_video_outputs(run, args.out, gyroflow=lens_profile_names(args))
     result = run.result
     status = summary["verdict"]["status"]

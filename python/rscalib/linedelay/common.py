@@ -4,6 +4,7 @@ solve can raise and the fields their result.json summaries have in common."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
@@ -143,3 +144,108 @@ def summary_fields(result, knots: int, **model_fields) -> dict:
         "initial_line_delay_s": result.initial_line_delay_s,
         "solve_time_s": result.solve_time_s,
     }
+
+
+# ------------------------------------------------------------------ --refine-intrinsics
+
+# The default prior on the intrinsics when the calibration carries no covariance
+# (docs/formulation.md §14): sigma_f = 2 % of f, sigma_c = 10 px, and per model the distortion's
+# sigma (None: held at the camera's value when it is 0, the lens term the calibration did not fit).
+DEFAULT_PRIOR_FOCAL_FRACTION = 0.02
+DEFAULT_PRIOR_CENTRE_PX = 10.0
+DEFAULT_PRIOR_DISTORTION_STD = {
+    "pinhole-radtan": (0.05, 0.05, 0.002, 0.002, 0.05),       # k1, k2, p1, p2, k3 (k3 held when 0)
+    "pinhole-equidistant": (0.02, 0.02, 0.02, 0.02),          # k1..k4 (k3, k4 held when 0)
+    "civera-radial": (None, None),                            # k1, k2 held (mm^-2, mm^-4: no scale-free sigma)
+}
+# Distortion terms held at the camera's value when it is exactly 0 (not fitted by the calibration).
+_HELD_WHEN_ZERO = {"pinhole-radtan": ("k3",), "pinhole-equidistant": ("k3", "k4"), "civera-radial": ()}
+
+
+@dataclass
+class IntrinsicsPrior:
+    """The prior N(mean, covariance) on the camera's parameters (their layout, docs/conventions.md)
+    for the joint refinement with the line delay (docs/formulation.md §14). fixed: indices held at
+    the starting value; source: where the covariance came from ("default ..." or the file)."""
+
+    names: list
+    mean: np.ndarray
+    covariance: np.ndarray
+    fixed: tuple
+    source: str
+
+    @property
+    def std(self) -> np.ndarray:
+        """Prior standard deviation per parameter (0 for the held ones)."""
+        std = np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
+        std[list(self.fixed)] = 0.0
+        return std
+
+    def to_dict(self) -> dict:
+        return {"source": self.source, "std": {n: float(s) for n, s in zip(self.names, self.std)},
+                "held": [self.names[i] for i in self.fixed]}
+
+
+def default_intrinsics_prior(camera: CameraModel) -> IntrinsicsPrior:
+    """The documented default prior (no covariance given): sigma_f 2 % of f, sigma_c 10 px,
+    the distortion's sigma of DEFAULT_PRIOR_DISTORTION_STD."""
+    names = list(camera.param_names)
+    mean = np.asarray(camera.params, dtype=np.float64)
+    focal = ("f",) if camera.model == "civera-radial" else ("fx", "fy")
+    std, fixed = np.zeros(len(names)), []
+    distortion = iter(DEFAULT_PRIOR_DISTORTION_STD[camera.model])
+    for i, name in enumerate(names):
+        if name in focal:
+            std[i] = DEFAULT_PRIOR_FOCAL_FRACTION * mean[i]
+        elif name in ("cx", "cy"):
+            std[i] = DEFAULT_PRIOR_CENTRE_PX
+        else:
+            sigma = next(distortion)
+            if sigma is None or (name in _HELD_WHEN_ZERO[camera.model] and mean[i] == 0.0):
+                fixed.append(i)
+                sigma = 1.0
+            std[i] = sigma
+    held = [names[i] for i in fixed]
+    source = (f"default (no covariance given): sigma_f {DEFAULT_PRIOR_FOCAL_FRACTION * 100:g} % of f, "
+              f"sigma_c {DEFAULT_PRIOR_CENTRE_PX:g} px, distortion "
+              + ", ".join(f"{n} {s:g}" for n, s, i in zip(names, std, range(len(names)))
+                          if n not in focal + ("cx", "cy") and i not in fixed)
+              + (f"; held: {', '.join(held)}" if held else ""))
+    return IntrinsicsPrior(names, mean, np.diag(std ** 2), tuple(fixed), source)
+
+
+def intrinsics_prior_from_std(camera: CameraModel, std, source: str) -> IntrinsicsPrior:
+    """A prior from per-parameter standard deviations (a dict name -> sigma, or a sequence in the
+    layout's order), e.g. the `std` of an `rscalib intrinsics` result.json; parameters with sigma 0
+    (not fitted) are held. The mean is the camera's parameters."""
+    names = list(camera.param_names)
+    if isinstance(std, dict):
+        missing = [n for n in names if n not in std]
+        if missing:
+            raise InputError(f"the intrinsics prior has no sigma for {', '.join(missing)}")
+        std = [std[n] for n in names]
+    std = np.asarray(std, dtype=np.float64).reshape(-1)
+    if std.size != len(names):
+        raise InputError(f"the intrinsics prior needs {len(names)} sigmas ({', '.join(names)}), not {std.size}")
+    if not np.all(np.isfinite(std)) or np.any(std < 0):
+        raise InputError("the intrinsics prior's sigmas must be finite and non-negative")
+    fixed = tuple(int(i) for i in np.flatnonzero(std == 0))
+    covariance = np.diag(np.where(std > 0, std, 1.0) ** 2)
+    return IntrinsicsPrior(names, np.asarray(camera.params, dtype=np.float64), covariance, fixed, source)
+
+
+def load_intrinsics_prior(path, camera: CameraModel) -> IntrinsicsPrior:
+    """The prior of an `rscalib intrinsics` result.json (its per-parameter `std`; OpenCV gives no
+    correlations, so the covariance is diagonal) around the camera's parameters."""
+    import json
+    from pathlib import Path
+
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as error:
+        raise InputError(f"cannot read the intrinsics prior {path}: {error}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("std"), dict):
+        raise InputError(f"{path}: not an `rscalib intrinsics` result.json (no `std` of the parameters)")
+    if data.get("model", camera.model) != camera.model:
+        raise InputError(f"{path}: the prior is for a {data.get('model')} camera, the camera file is {camera.model}")
+    return intrinsics_prior_from_std(camera, data["std"], f"standard deviations of {path}")

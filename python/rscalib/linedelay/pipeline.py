@@ -29,7 +29,7 @@ from ..errors import InputError
 from ..io.cameras import load_camera
 from ..io.targets import Target, load_target
 from . import selfcheck
-from .common import UNDETERMINED_STD_FRACTION, frame_rate_hz
+from .common import UNDETERMINED_STD_FRACTION, IntrinsicsPrior, frame_rate_hz, load_intrinsics_prior
 from .guidance import capture_guidance
 from .linear import LinearInterpResult, calibrate_line_delay_linear
 from .pnp import PnpTrajectory, compare_with_pnp, pnp_trajectory
@@ -126,7 +126,8 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
                     on_detection: DetectionCallback = None, on_round: RoundCallback = None,
                     start_s: Optional[float] = None, end_s: Optional[float] = None, readout: str = "auto",
                     self_check: bool = True, min_segment_s: Optional[float] = None,
-                    noise_model: str = "frame") -> VideoResult:
+                    noise_model: str = "frame", refine_intrinsics: bool = False,
+                    intrinsics_prior: Union[None, PathLike, IntrinsicsPrior] = None) -> VideoResult:
     """The line delay of a video of a target (`rscalib linedelay`).
 
     video: file or image folder; target, camera: their files (target YAML; OpenCV or Kalibr camera).
@@ -137,7 +138,10 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
     start_s, end_s: use the frames in this time window only. readout: the sensor's readout direction
     (linedelay.readout.READOUTS) or "auto" (top-down, unless the video's rotation metadata says the
     picture was turned). self_check: also solve the two halves (linedelay.selfcheck; spline only) and
-    widen sigma_d by its rule. min_segment_s, noise_model: calibrate_line_delay's."""
+    widen sigma_d by its rule. min_segment_s, noise_model: calibrate_line_delay's. refine_intrinsics
+    (spline, top-down readout): refine the camera jointly (calibrate_line_delay's), with the prior
+    `intrinsics_prior` (an IntrinsicsPrior, or an `rscalib intrinsics` result.json whose `std` it uses;
+    default: the documented default prior); the run's camera is then the refined one."""
     if model not in TRAJECTORY_MODELS:
         raise InputError(f"unknown trajectory model {model!r}; one of {', '.join(TRAJECTORY_MODELS)}")
     check_files(video, target, camera)
@@ -152,7 +156,13 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
         if spline_only:
             raise InputError(f"{', '.join(spline_only)}: only for the spline trajectory (the linear model has no "
                              "knots, no motion prior and unstandardised errors)")
+    if refine_intrinsics and model != "spline":
+        raise InputError("--refine-intrinsics: only with the spline trajectory")
+    if intrinsics_prior is not None and not refine_intrinsics:
+        raise InputError("an intrinsics prior is only used with --refine-intrinsics")
     camera_model = load_camera(camera).camera
+    if refine_intrinsics and intrinsics_prior is not None and not isinstance(intrinsics_prior, IntrinsicsPrior):
+        intrinsics_prior = load_intrinsics_prior(intrinsics_prior, camera_model)
     detection = _detections(video, target, camera_model, workers, cache, cache_dir, progress, on_detection)
     notes = list(detection.warnings)
     observations = time_window(detection.observations, start_s, end_s)
@@ -162,6 +172,8 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
         if hint:
             notes.append(f"the video's rotation metadata turns the picture, so the sensor rows are not the image "
                          f"rows: readout {hint} assumed (override with --readout)")
+    if refine_intrinsics and readout != "top-down":
+        raise InputError(f"--refine-intrinsics: only with a top-down readout for now (here {readout})")
     observations, solve_camera = to_top_down(observations, camera_model, readout)
     if model == "linear":
         result = calibrate_line_delay_linear(observations, solve_camera, rows, pixel_sigma=pixel_sigma,
@@ -172,6 +184,8 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
         options = dict(pixel_sigma=pixel_sigma, robust_loss=robust_loss, max_rounds=max_rounds,
                        standardise_errors=standardise_errors, use_motion_prior=use_motion_prior,
                        min_segment_s=min_segment_s, noise_model=noise_model, **knots)
+        if refine_intrinsics:  # absent otherwise: the default path's calls are unchanged
+            options |= {"refine_intrinsics": True, "intrinsics_prior": intrinsics_prior}
         result = calibrate_line_delay(observations, solve_camera, rows, progress=on_round, **options)
         if self_check:
             check = selfcheck.halves(result.used_observations,
@@ -189,6 +203,9 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
         settings = {"trajectory_model": "spline", "standardise_errors": standardise_errors,
                     "motion_prior": use_motion_prior, "adaptive_knots": uniform_knots is None,
                     "noise_model": noise_model}
+        if refine_intrinsics:
+            settings["refine_intrinsics"] = True
+            camera_model = result.camera  # the camera files carry the refined intrinsics
     settings |= {"readout": readout, "start_s": start_s, "end_s": end_s}
     result.warnings[:0] = notes
     run = VideoResult(model, result, camera_model, detection, _inputs(video, target, camera), settings)

@@ -20,8 +20,10 @@ from ..errors import InputError
 from ..observations import Observations
 from . import noise
 from .common import (
+    IntrinsicsPrior,
     assess_noise_and_determinacy,
     choose_pixel_sigma,
+    default_intrinsics_prior,
     initial_values,
     seed_poses,
     solve_warnings,
@@ -93,6 +95,10 @@ class LineDelayResult:
     noise: dict = field(default_factory=dict)
     solver_line_delay_std_s: float = float("nan")   # sigma_d of the solver, before any inflation
     self_check: Optional[dict] = None                # the halves' check (linedelay.selfcheck), if run
+    # --refine-intrinsics (docs/formulation.md §14): the refined camera and the intrinsics' summary
+    # (start, estimate, sigma, prior, covariance of [d, intrinsics]); None when the camera was known.
+    camera: Optional[CameraModel] = field(default=None, repr=False)
+    intrinsics: Optional[dict] = None
 
     @property
     def num_segments(self) -> int:
@@ -102,6 +108,8 @@ class LineDelayResult:
         """JSON-ready fields (the result.json of `rscalib linedelay`, docs/architecture.md)."""
         extra = {"solver_line_delay_std_s": _finite_or_none(self.solver_line_delay_std_s),
                  "noise": self.noise, "self_check": self.self_check}
+        if self.intrinsics is not None:
+            extra["intrinsics"] = self.intrinsics
         return summary_fields(self, len(self.knots)) | extra | {
             "history": [vars(r) | {"line_delay_std_s": r.line_delay_std_s if math.isfinite(r.line_delay_std_s) else None}
                         for r in self.history],
@@ -181,6 +189,8 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                          robust_loss: str = "none",
                          num_threads: int = 2,
                          noise_model: str = "frame",
+                         refine_intrinsics: bool = False,
+                         intrinsics_prior: Optional[IntrinsicsPrior] = None,
                          progress: Optional[Callable[[RoundRecord], None]] = None) -> LineDelayResult:
     """Estimate the line delay d (s/row) and the continuous-time trajectory (Oth et al. 2013 §3-4).
 
@@ -195,6 +205,10 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
     noise_model: "frame" (default: a sigma per frame, a fixed error pattern and frame-to-frame
     correlation learnt from the residuals, docs/formulation.md §8) or "video" (one sigma for the
     whole video, the model before issue 12; for experiments).
+    refine_intrinsics: refine the camera's parameters jointly with the trajectory and d, from
+    `camera` as the start, with the prior `intrinsics_prior` (common.IntrinsicsPrior; default:
+    common.default_intrinsics_prior, sigma_f 2 %, sigma_c 10 px); the result's `camera` and
+    `intrinsics` (with the covariance of [d, intrinsics]) hold the outcome (docs/formulation.md §14).
     progress: called after each round.
     """
     return _run(observations, camera, rows, estimate=True, pixel_sigma=pixel_sigma,
@@ -203,7 +217,8 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                 min_segment_s=min_segment_s, split_margin_sigmas=split_margin_sigmas,
                 standardise_errors=standardise_errors,
                 use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
-                robust_loss=robust_loss, num_threads=num_threads, noise_model=noise_model, progress=progress)
+                robust_loss=robust_loss, num_threads=num_threads, noise_model=noise_model,
+                refine_intrinsics=refine_intrinsics, intrinsics_prior=intrinsics_prior, progress=progress)
 
 
 def localize(observations: Observations, camera: CameraModel, rows: Optional[int] = None,
@@ -219,7 +234,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
          initial_segments_per_s=None, num_segments=None, adaptive_knots=True, max_rounds=8,
          min_segment_s=None, split_margin_sigmas=2.0, standardise_errors=True, use_motion_prior=True,
          motion_prior_q=DEFAULT_MOTION_PRIOR_Q, robust_loss="none", num_threads=2, noise_model="frame",
-         progress=None) -> LineDelayResult:
+         refine_intrinsics=False, intrinsics_prior=None, progress=None) -> LineDelayResult:
     if noise_model not in NOISE_MODELS:
         raise InputError(f"unknown noise model {noise_model!r} ({', '.join(NOISE_MODELS)})")
     started = time.perf_counter()
@@ -266,6 +281,9 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
 
     if per_frame:
         use_sigma(obs_sigma)
+    start_camera = camera
+    if refine_intrinsics:
+        prior = _set_intrinsics_prior(options, camera, intrinsics_prior)
     args = (used.frame_times_s[used.frame_index], used.uv, used.points_w(), camera)
     history: list[RoundRecord] = []
     adapted = not adaptive_knots
@@ -276,6 +294,9 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         last_chance = round_index == max_rounds - 1
         summary = _core.solve_line_delay(*args, trajectory, d, options)
         d = summary.line_delay_s
+        if refine_intrinsics:  # the next round starts from the refined camera
+            camera = _with_params(camera, summary.intrinsics)
+            args = args[:3] + (camera,)
         cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
         segment_cost = summary.segment_cost
         if per_frame:
@@ -313,6 +334,9 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     options.compute_covariance = estimate
     summary = _core.solve_line_delay(*args, trajectory, d, options)
     d = summary.line_delay_s
+    intrinsics = None
+    if refine_intrinsics:
+        camera = _with_params(camera, summary.intrinsics)
     if per_frame:
         structure = noise.residual_structure(used, np.asarray(summary.residual_px), white)
     solver_std = summary.line_delay_std_s if estimate else 0.0
@@ -348,6 +372,9 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         warnings.append(f"{summary.clamped_weights} observations move down the image nearly as fast as the "
                         "shutter; their error weights were clamped")
     solve_warnings(summary, warnings)
+    if refine_intrinsics:
+        intrinsics = _intrinsics_summary(summary, start_camera, camera, prior, structure.inflation if estimate else 1.0,
+                                         warnings)
 
     return LineDelayResult(
         line_delay_s=d, line_delay_std_s=std, readout_time_s=d * rows, rows=rows,
@@ -360,7 +387,73 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         observation_time_s=np.asarray(summary.observation_time_s), residual_px=np.asarray(summary.residual_px),
         image_velocity_px_s=np.asarray(summary.image_velocity_px_s),
         standardised_sq=np.asarray(summary.standardised_sq), frame_poses=used_poses, used_observations=used,
-        observation_sigma_px=obs_sigma, noise=noise_summary, solver_line_delay_std_s=solver_std)
+        observation_sigma_px=obs_sigma, noise=noise_summary, solver_line_delay_std_s=solver_std,
+        camera=camera if refine_intrinsics else None, intrinsics=intrinsics)
+
+
+def _set_intrinsics_prior(options: _core.RsSolverOptions, camera: CameraModel,
+                          prior: Optional[IntrinsicsPrior]) -> IntrinsicsPrior:
+    """Switches the solver to the joint refinement of the intrinsics with `prior` (default:
+    common.default_intrinsics_prior) around `camera`'s parameters (docs/formulation.md §14)."""
+    if prior is None:
+        prior = default_intrinsics_prior(camera)
+    if len(prior.mean) != len(camera.params):
+        raise InputError(f"the intrinsics prior has {len(prior.mean)} parameters, the {camera.model} camera "
+                         f"{len(camera.params)}")
+    options.refine_intrinsics = True
+    options.intrinsics_prior_mean = np.asarray(prior.mean, dtype=np.float64)
+    options.intrinsics_prior_covariance = np.asarray(prior.covariance, dtype=np.float64)
+    options.fixed_intrinsics = [int(i) for i in prior.fixed]
+    return prior
+
+
+def _with_params(camera: CameraModel, params) -> CameraModel:
+    """`camera` with other parameters (same model, size and pixel size)."""
+    return CameraModel(camera.model, np.asarray(params, dtype=np.float64), camera.width, camera.height,
+                       np.asarray(camera.pixel_size_mm, dtype=np.float64))
+
+
+def _intrinsics_summary(summary, start: CameraModel, refined: CameraModel, prior: IntrinsicsPrior,
+                        inflation: float, warnings: list) -> dict:
+    """JSON-ready: the intrinsics' start, estimate and sigma, the prior, and the covariance of
+    [d, intrinsics] (s/row and the layout's units; scaled by the noise model's inflation, like sigma_d)."""
+    names = list(refined.param_names)
+    covariance = np.asarray(summary.line_delay_intrinsics_covariance, dtype=np.float64)
+    n = len(names)
+    if covariance.shape == (n + 1, n + 1):
+        covariance = covariance * inflation ** 2
+        std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            correlation = covariance / np.outer(std, std)
+        correlation_with_d = {name: (float(c) if math.isfinite(c) else None)
+                              for name, c in zip(names, correlation[0, 1:])}
+        covariance_list = covariance.tolist()
+    else:
+        std = np.full(n + 1, np.nan)
+        correlation_with_d, covariance_list = None, None
+        warnings.append("the covariance of the line delay with the intrinsics could not be computed")
+    start_p, refined_p = np.asarray(start.params), np.asarray(refined.params)
+    prior_std = prior.std
+    with np.errstate(invalid="ignore", divide="ignore"):
+        shift_sigmas = np.where(prior_std > 0, (refined_p - start_p) / prior_std, 0.0)
+    far = [f"{name} moved {z:+.1f} prior sigma" for name, z in zip(names, shift_sigmas) if abs(z) > 3]
+    if far:
+        warnings.append("the refined intrinsics are far from the given calibration (" + ", ".join(far)
+                        + "): check the camera file, or that the video is of the same camera and zoom")
+    return {
+        "refined": True,
+        "model": refined.model,
+        "names": names,
+        "initial": {name: float(v) for name, v in zip(names, start_p)},
+        "estimate": {name: float(v) for name, v in zip(names, refined_p)},
+        "std": {name: (float(s) if math.isfinite(s) else None) for name, s in zip(names, std[1:])},
+        "shift_in_prior_sigma": {name: float(z) for name, z in zip(names, shift_sigmas)},
+        "prior": prior.to_dict(),
+        "prior_cost": float(summary.intrinsics_prior_cost),
+        "correlation_with_line_delay": correlation_with_d,
+        "covariance_order": ["line_delay_s"] + names,
+        "covariance": covariance_list,
+    }
 
 
 def _segment_sums(trajectory: BSpline, times: np.ndarray, values: np.ndarray, segments: int) -> np.ndarray:
