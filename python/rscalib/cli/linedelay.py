@@ -222,6 +222,11 @@ def _run_linedelay(args) -> int:
               + (" " if run.model == "linear" else "; ") + verdict)
         for reason in summary["verdict"]["reasons"]:
             print(f"  because: {in_flags(reason)}")
+    refined = summary.get("intrinsics")
+    if refined:
+        print("intrinsics refined: " + ", ".join(
+            f"{n} {refined['estimate'][n]:.6g}" + ("" if refined["std"][n] is None else f" +- {refined['std'][n]:.3g}")
+            for n in refined["names"] if n not in refined["prior"]["held"]) + f" (prior: {refined['prior']['source']})")
     for advice in (summary.get("guidance") or {}).get("advice", []):
         print(f"  to film better: {advice}")
     _print_warnings(summary)
