@@ -15,6 +15,7 @@ file system).
 from __future__ import annotations
 
 import hashlib
+import itertools
 import os
 import shlex
 import shutil
@@ -41,7 +42,8 @@ JOBS_DIR, LOGS_DIR = "jobs", "logs"
 # threads the last bits of cv2.calibrateCameraExtended, so of `rscalib intrinsics`, vary run to run).
 JOB_THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                   "OPENCV_FOR_THREADS_NUM": "1"}
-POLL_S = 0.1          # how often a running job's memory and time are checked
+POLL_S = 0.1          # how often a job is checked for its end (the subprocess is reaped by polling)
+MEMORY_EVERY = 5      # and every 5th check (0.5 s) its memory and time
 _HASH_CHUNK_BYTES = 1 << 20
 
 
@@ -90,23 +92,22 @@ def content_key(spec_hash: str, hashes: list) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _children() -> dict:
-    """pid -> parent pid of every process (Linux /proc; empty elsewhere)."""
-    parents = {}
-    for entry in Path("/proc").glob("[0-9]*/stat"):
+def _children_of(pid: int) -> list:
+    """The child processes of pid, from /proc/<pid>/task/*/children (Linux; [] elsewhere or when gone)."""
+    children = []
+    for task in Path(f"/proc/{pid}/task").glob("*/children"):
         try:
-            text = entry.read_text()
-            parents[int(entry.parent.name)] = int(text.rsplit(")", 1)[1].split()[1])
-        except (OSError, ValueError, IndexError):
+            children += [int(c) for c in task.read_text().split()]
+        except (OSError, ValueError):
             continue
-    return parents
+    return children
 
 
 def _tree(pid: int) -> list:
-    """pid and all its descendants."""
-    parents, tree, frontier = _children(), [pid], [pid]
+    """pid and all its descendants (a few small reads per process of the job, not a scan of /proc)."""
+    tree, frontier = [pid], [pid]
     while frontier:
-        frontier = [p for p, parent in parents.items() if parent in frontier]
+        frontier = [child for p in frontier for child in _children_of(p)]
         tree += frontier
     return tree
 
@@ -170,10 +171,13 @@ def run_job(task: dict) -> dict:
         worker.log_event(EVENT_TOPIC, {"id": task["id"], "pid": process.pid, "worker": where,
                                        "started_utc": started_utc})
     killed_because, peak_tree_bytes, timeout_s = "", 0, task.get("timeout_s")
-    while True:
+    for check in itertools.count():
         pid, status, usage = os.wait4(process.pid, os.WNOHANG)
         if pid:
             break
+        time.sleep(POLL_S)
+        if check % MEMORY_EVERY:
+            continue
         tree_bytes = _rss_bytes(_tree(process.pid))
         peak_tree_bytes = max(peak_tree_bytes, tree_bytes)
         if memory_limit_bytes and tree_bytes > memory_limit_bytes and not killed_because:
@@ -183,13 +187,13 @@ def run_job(task: dict) -> dict:
         if timeout_s and time.monotonic() - started > timeout_s and not killed_because:
             killed_because = f"time limit: still running after {timeout_s:g} s (--job-timeout)"
             _kill_tree(process.pid)
-        time.sleep(POLL_S)
     process.returncode = exit_code = os.waitstatus_to_exitcode(status)
     outcome = read_outcome(task["command"], out_dir, None if killed_because else exit_code, log_path, killed_because)
     if killed_because:
         outcome["exit_code"] = exit_code
     peak_bytes = max(usage.ru_maxrss * 1024, peak_tree_bytes)  # ru_maxrss is in KiB on Linux
     return {**base, **outcome, "wall_time_s": time.monotonic() - started, "peak_memory_mb": peak_bytes / 2**20,
+            "cpu_time_s": usage.ru_utime + usage.ru_stime,  # the job and its waited-for children
             "worker": where, "pid": process.pid, "started_utc": started_utc, "finished_utc": utc_now()}
 
 

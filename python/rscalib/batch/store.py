@@ -38,7 +38,7 @@ COLUMNS = {
     "rscalib_version": "TEXT", "status": "TEXT", "exit_code": "INTEGER", "reason": "TEXT", "verdict": "TEXT",
     "value_name": "TEXT", "value": "REAL", "value_std": "REAL",   # the headline number and its sigma
     "headline": "TEXT",           # JSON: the command's main numbers with their sigmas
-    "wall_time_s": "REAL", "peak_memory_mb": "REAL", "worker": "TEXT", "pid": "INTEGER",
+    "wall_time_s": "REAL", "cpu_time_s": "REAL", "peak_memory_mb": "REAL", "worker": "TEXT", "pid": "INTEGER",
     "queued_utc": "TEXT", "started_utc": "TEXT", "finished_utc": "TEXT",
     "runs": "INTEGER",            # how many times this job has been run in this folder
     "out_dir": "TEXT", "log_path": "TEXT",
@@ -65,6 +65,9 @@ class ResultStore:
             self._db.execute("CREATE TABLE IF NOT EXISTS jobs ("
                              + ", ".join(f'"{c}" {t}' for c, t in COLUMNS.items()) + ")")
             self._db.execute("CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT)")
+            present = {r[1] for r in self._db.execute("PRAGMA table_info(jobs)")}
+            for column in COLUMNS.keys() - present:  # a store written by an older rscalib: add what is new
+                self._db.execute(f'ALTER TABLE jobs ADD COLUMN "{column}" {COLUMNS[column]}')
 
     def close(self) -> None:
         with self._lock:

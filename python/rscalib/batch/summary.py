@@ -103,11 +103,12 @@ def write_index(out_dir, rows: list) -> Path:
             _cell("" if r.get("value_std") is None else f"{r['value_std']:.3g}", r.get("value_std") or ""),
             _cell(html.escape(r.get("verdict") or "")), _cell(html.escape(r.get("reason") or "")),
             _cell("" if r.get("wall_time_s") is None else f"{r['wall_time_s']:.1f}", r.get("wall_time_s") or ""),
+            _cell("" if r.get("cpu_time_s") is None else f"{r['cpu_time_s']:.1f}", r.get("cpu_time_s") or ""),
             _cell("" if r.get("peak_memory_mb") is None else f"{r['peak_memory_mb']:.0f}", r.get("peak_memory_mb") or ""),
             _cell(f"{report} {_link(out, r.get('log_path'), 'log')}"),
         ]) + "</tr>")
     headers = ["job", "mode", "command", "status", "exit", "result", "σ", "verdict", "reason", "wall time (s)",
-               "peak memory (MB)", "files"]
+               "CPU (s)", "peak memory (MB)", "files"]
     page = f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>rscalib batch: {html.escape(out.name)}</title>
 <style>body{{font-family:sans-serif;margin:1.5em}} table{{border-collapse:collapse;font-size:90%}}
