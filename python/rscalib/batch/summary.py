@@ -55,7 +55,11 @@ def plot_line_delay_by_mode(rows: list, path: Path) -> bool:
     ax.set_xticks(range(len(modes)))
     ax.set_xticklabels(modes, rotation=30 if len(modes) > 4 else 0, ha="right" if len(modes) > 4 else "center")
     ax.set_ylabel("line delay (µs/row), ±1σ")
-    ax.set_title("Line delay per camera mode (blue: trusted, orange: not trusted; ■ flicker)")
+    ax.set_title("Line delay per camera mode", fontsize=11)
+    key = [ax.errorbar([], [], yerr=[], fmt=fmt, ms=4, color=color, label=label)
+           for fmt, color, label in (("o", "tab:blue", "linedelay, trusted"), ("o", "tab:orange", "not trusted"),
+                                     ("s", "tab:blue", "flicker"))]
+    ax.legend(handles=key, fontsize=8, loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
