@@ -29,7 +29,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, Optional, Sequence, Union
+from typing import Callable, Iterator, Optional, Sequence, Union
 
 import cv2
 import numpy as np
@@ -186,10 +186,14 @@ class Scene:
                 "planes": [p.describe() for p in self.planes]}
 
 
-def room_scene(seed: int = 0, size_m: Sequence[float] = (4.0, 3.0, 2.5), texels_per_m: float = 200.0
-               ) -> Scene:
+def room_scene(seed: int = 0, size_m: Sequence[float] = (4.0, 3.0, 2.5), texels_per_m: float = 200.0,
+               texture_fn: Optional[Callable[[float, float, int, float], np.ndarray]] = None) -> Scene:
     """A closed box room ``size_m = (length x, width y, height z)``: world origin at the centre of
-    the floor, z up; six planes (floor, ceiling, four walls), each with its own seeded texture."""
+    the floor, z up; six planes (floor, ceiling, four walls), each with its own seeded texture.
+
+    ``texture_fn(width_m, height_m, seed, texels_per_m)`` makes a plane's texture (default
+    :func:`procedural_texture`; e.g. photographic tiles, ``rscalib.sim.scene_realism``)."""
+    texture_fn = procedural_texture if texture_fn is None else texture_fn
     lx, ly, lz = (float(s) for s in size_m)
     x0, y0 = -0.5 * lx, -0.5 * ly
     ex, ey, ez = np.eye(3)
@@ -206,7 +210,7 @@ def room_scene(seed: int = 0, size_m: Sequence[float] = (4.0, 3.0, 2.5), texels_
     for k, (name, origin, au, av, size) in enumerate(specs):
         tex_seed = int(seed) * 16 + k  # different texture per plane, all from the one seed
         planes.append(TexturedPlane(name, origin, au, av, size,
-                                    procedural_texture(size[0], size[1], tex_seed, texels_per_m), texels_per_m,
+                                    texture_fn(size[0], size[1], tex_seed, texels_per_m), texels_per_m,
                                     texture_seed=tex_seed))
     return Scene(planes, description=f"room {lx} x {ly} x {lz} m, origin at floor centre, z up")
 
@@ -358,13 +362,21 @@ class SceneRenderer:
         dots = rays_c @ axes_c
         rel = centre_w[None, :] - self._origins      # (P, 3) camera centre relative to plane origins
         rel_dots = np.einsum("pj,pjk->pk", rel, self._axes).astype(dtype)  # (P, [n·rel, u·rel, v·rel])
+        return self._nearest(dots, rel_dots[:, 0], rel_dots[:, 1], rel_dots[:, 2])
+
+    def _nearest(self, dots: np.ndarray, rel_n: np.ndarray, rel_u: np.ndarray, rel_v: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The nearest hit from the rays' dot products with the plane axes (N, 3P) and the camera
+        centre's plane coordinates (P,) or per ray (N, P)."""
+        dtype = dots.dtype
+        P = len(self.scene.planes)
         den = dots[:, :P]
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.divide(-rel_dots[:, 0], den)
+            t = np.divide(-rel_n, den)
         s = dots[:, P:2 * P] * t
-        s += rel_dots[:, 1]
+        s += rel_u
         w = dots[:, 2 * P:] * t
-        w += rel_dots[:, 2]
+        w += rel_v
         tol = _HIT_TOLERANCE_M
         size_u = (self._sizes[:, 0] + tol).astype(dtype)
         size_v = (self._sizes[:, 1] + tol).astype(dtype)
@@ -431,9 +443,25 @@ class SceneRenderer:
         bottom = f[idx + width] + fx * (f[idx + width + 1] - f[idx + width])
         return top + fy * (bottom - top)
 
+    def _intersect_rows(self, rays_c: np.ndarray, R_rows: np.ndarray, p_rows: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_intersect` with one pose per block of rays: ``rays_c`` (B, M, 3), poses (B, 3, 3), (B, 3)."""
+        dtype = rays_c.dtype
+        B, M, _ = rays_c.shape
+        P = len(self.scene.planes)
+        centre_w = -np.einsum("bji,bj->bi", R_rows, p_rows)
+        axes_c = np.einsum("bij,pjk->bikp", R_rows, self._axes).reshape(B, 3, 3 * P).astype(dtype)
+        dots = np.matmul(rays_c, axes_c).reshape(B * M, 3 * P)
+        rel = centre_w[:, None, :] - self._origins[None]
+        rel_dots = np.repeat(np.einsum("bpj,pjk->bkp", rel, self._axes).astype(dtype), M, axis=0)  # (B M, 3, P)
+        return self._nearest(dots, rel_dots[:, 0], rel_dots[:, 1], rel_dots[:, 2])
+
     def _shade(self, start: int, stop: int, R: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Texture values of samples start … stop − 1."""
-        k, t, s, w, cos_abs = self._intersect(self.rays_c[start:stop], R, p)
+        return self._shade_hits(start, stop, *self._intersect(self.rays_c[start:stop], R, p))
+
+    def _shade_hits(self, start: int, stop: int, k: np.ndarray, t: np.ndarray, s: np.ndarray, w: np.ndarray,
+                    cos_abs: np.ndarray) -> np.ndarray:
         values = np.full(len(k), self.scene.background, dtype=np.float32)
         hit = k >= 0
         # Footprint of one sample on the plane: range × angle, stretched by 1/√cos (geometric mean of
@@ -457,6 +485,10 @@ class SceneRenderer:
             stop = min(start + self.chunk_samples, N)
             values[start:stop] = self._shade(start, stop, R, p)
 
+        return self._run(work, starts, values)
+
+    def _run(self, work: Callable[[int], None], starts: range, values: np.ndarray) -> np.ndarray:
+        """Call ``work`` on every start (in ``threads`` threads), then average ``values`` to pixels."""
         if self.threads > 1:
             with ThreadPoolExecutor(self.threads) as pool:
                 list(pool.map(work, starts))
@@ -465,6 +497,24 @@ class SceneRenderer:
                 work(start)
         n = self.supersampling
         return values.reshape(self.height, n, self.width, n).mean(axis=(1, 3))
+
+    def render_rows(self, R_rows: np.ndarray, p_rows: np.ndarray) -> np.ndarray:
+        """Rolling shutter: grey image (H, W) float32 where pixel row v is seen from its own pose
+        ``x_c = R_rows[v] x_w + p_rows[v]`` (all supersamples of the row at the row's time)."""
+        R_rows = np.asarray(R_rows, dtype=np.float64).reshape(self.height, 3, 3)
+        p_rows = np.asarray(p_rows, dtype=np.float64).reshape(self.height, 3)
+        per_row = self.supersampling ** 2 * self.width
+        values = np.empty(len(self.rays_c), dtype=np.float32)
+        rows_per_call = max(1, self.chunk_samples // per_row)
+
+        def work(row0: int) -> None:
+            row1 = min(row0 + rows_per_call, self.height)
+            start, stop = row0 * per_row, row1 * per_row
+            rays = self.rays_c[start:stop].reshape(row1 - row0, per_row, 3)
+            hits = self._intersect_rows(rays, R_rows[row0:row1], p_rows[row0:row1])
+            values[start:stop] = self._shade_hits(start, stop, *hits)
+
+        return self._run(work, range(0, self.height, rows_per_call), values)
 
 
 # --------------------------------------------------------------------------------------------------

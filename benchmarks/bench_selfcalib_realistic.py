@@ -1,0 +1,158 @@
+"""`rscalib selfcalib` on phone-like rendered room walks (issue 11; docs/sog.md §16, docs/benchmarks.md).
+
+Sequences: the three motion styles of rscalib.sim.scene_realism (walk-forward, look-around,
+sideways-dolly) × 320×240 (the paper's camera) and 640×480 (the S3 phone's camera) × SEEDS fresh
+seeds (default 5 from 1100: 30 sequences), FRAMES frames each, rendered with every realism option
+(photographic tiles from ../shared/data, rolling shutter, motion blur, auto-exposure, noise,
+vignetting, frame jitter and drops, H.264) and cached under CACHE. Each is run through the CLI as a
+user would, in its own process:
+
+    python -m rscalib selfcalib SEQ --pixel-size-mm PX --out OUT --quiet
+
+recording the exit code, f, cx, cy, k1, k2 with their reported 99 % bounds (and the filter's own),
+whether the truth is inside, the "determined" verdict, wall time and peak RSS (os.wait4 of the child).
+
+Usage: PYTHONPATH=python .venv/bin/python benchmarks/bench_selfcalib_realistic.py
+           [--seeds 5] [--seed0 1100] [--frames 200] [--workers 2] [--cache /tmp/rscalib_h11_selfcalib_realistic]
+           [--out benchmarks/results/bench_selfcalib_realistic.json]
+Photographs: $RSCALIB_SHARED_DATA, else ../shared/data beside the repository (worktrees: set the variable).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+NAMES = ("f", "cx", "cy", "k1", "k2")
+STYLES = ("walk-forward", "look-around", "sideways-dolly")
+SIZES = ((320, 240), (640, 480))
+REPO = Path(__file__).resolve().parents[1]
+
+
+def pixel_size_mm(width: int) -> float:
+    from rscalib.selfcalib.prior import PAPER_PIXEL_SIZE_MM
+    from rscalib.sim.scene_realism import PHONE_PIXEL_SIZE_MM
+    return PAPER_PIXEL_SIZE_MM if width == 320 else PHONE_PIXEL_SIZE_MM
+
+
+def run_one(style: str, size: tuple[int, int], seed: int, frames: int, cache: str) -> dict:
+    from rscalib.sim.scene_realism import render_realistic_scene
+
+    seq = Path(cache) / f"{style}_{size[0]}x{size[1]}_s{seed}_n{frames}"
+    render_s = 0.0
+    if not (seq / "truth.json").exists():  # truth.json is written last
+        render_s = render_realistic_scene(seq, style, size, frames, seed).elapsed_s
+    truth = json.loads((seq / "truth.json").read_text())
+    out = Path(cache) / "runs" / seq.name
+    cmd = [sys.executable, "-m", "rscalib", "selfcalib", str(seq), "--pixel-size-mm", str(pixel_size_mm(size[0])),
+           "--out", str(out), "--quiet"]
+    log = Path(cache) / "runs" / f"{seq.name}.log"
+    log.parent.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    with open(log, "w") as sink:
+        child = subprocess.Popen(cmd, stdout=sink, stderr=subprocess.STDOUT)
+        _, status, usage = os.wait4(child.pid, 0)  # the child's own rusage: its peak RSS
+    wall_s = time.perf_counter() - started
+    stderr = log.read_text()
+    row = {"style": style, "size": f"{size[0]}x{size[1]}", "seed": seed, "frames": truth["num_frames_rendered"],
+           "command": " ".join(cmd), "exit": os.waitstatus_to_exitcode(status), "wall_s": round(wall_s, 1),
+           "peak_rss_mb": round(usage.ru_maxrss / 1024, 1),
+           "render_s": round(render_s, 1), "textures": truth["textures"], "codec": truth["codec_used"],
+           "truth": dict(zip(NAMES, truth["camera"]["params"])), "output_tail": stderr[-400:]}
+    result_path = out / "result.json"
+    if result_path.exists():
+        result = json.loads(result_path.read_text())
+        row["estimate"] = {n: result[n] for n in NAMES}
+        row["bounds_99"] = {n: result[f"{n}_bounds_99"] for n in NAMES}
+        row["filter_bounds_99"] = dict(zip(NAMES, result.get("filter_bounds_99", [None] * 5)))
+        row["determined"] = bool(result.get("determined"))
+        row["reason"] = result.get("reason", "")
+        row["gaussians_left"] = result.get("gaussians_left")
+        row["frames_per_s"] = result.get("frames_per_s")
+        row["inside"] = {n: bool(row["bounds_99"][n][0] <= row["truth"][n] <= row["bounds_99"][n][1]) for n in NAMES}
+        fb = row["filter_bounds_99"]
+        row["inside_filter"] = {n: bool(fb[n] is not None and fb[n][0] <= row["truth"][n] <= fb[n][1]) for n in NAMES}
+        row["f_error_pct"] = 100.0 * (result["f"] / row["truth"]["f"] - 1.0)
+    return row
+
+
+def summarise(rows: list[dict]) -> dict:
+    ok = [r for r in rows if "estimate" in r]
+    det = [r for r in ok if r["determined"]]
+    side = [r for r in ok if r["style"] == "sideways-dolly"]
+
+    def frac(k, n):
+        return {"count": k, "of": n, "fraction": round(k / n, 3) if n else None}
+
+    summary = {
+        "sequences": len(rows), "with_result": len(ok),
+        "truth_inside_all_five_reported_99": frac(sum(all(r["inside"].values()) for r in ok), len(ok)),
+        "truth_inside_all_five_filter_99": frac(sum(all(r["inside_filter"].values()) for r in ok), len(ok)),
+        "determined": frac(len(det), len(ok)),
+        "determined_f_within_2pct": frac(sum(abs(r["f_error_pct"]) <= 2.0 for r in det), len(det)),
+        "determined_truth_inside_all_five": frac(sum(all(r["inside"].values()) for r in det), len(det)),
+        "sideways_flagged_not_determined": frac(sum(not r["determined"] for r in side), len(side)),
+        "sideways_confidently_wrong": frac(sum(r["determined"] and not all(r["inside"].values()) for r in side),
+                                           len(side)),
+        "by_style_size": {},
+    }
+    for style in STYLES:
+        for w, h in SIZES:
+            g = [r for r in ok if r["style"] == style and r["size"] == f"{w}x{h}"]
+            if not g:
+                continue
+            errs = sorted(abs(r["f_error_pct"]) for r in g)
+            summary["by_style_size"][f"{style} {w}x{h}"] = {
+                "runs": len(g), "determined": sum(r["determined"] for r in g),
+                "inside_all_five": sum(all(r["inside"].values()) for r in g),
+                "filter_inside_all_five": sum(all(r["inside_filter"].values()) for r in g),
+                "median_abs_f_error_pct": round(errs[len(errs) // 2], 2), "max_abs_f_error_pct": round(errs[-1], 2),
+                "median_wall_s": sorted(r["wall_s"] for r in g)[len(g) // 2],
+                "max_peak_rss_mb": max(r.get("peak_rss_mb") or 0 for r in g)}
+    return summary
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--seed0", type=int, default=1100)
+    ap.add_argument("--frames", type=int, default=200)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--cache", default="/tmp/rscalib_h11_selfcalib_realistic")
+    ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "bench_selfcalib_realistic.json"))
+    args = ap.parse_args()
+    jobs = [(style, size, args.seed0 + k, args.frames, args.cache) for k in range(args.seeds) for size in SIZES
+            for style in STYLES]
+    started = time.perf_counter()
+    rows = []
+    with ProcessPoolExecutor(args.workers) as pool:
+        futures = [pool.submit(run_one, *job) for job in jobs]
+        for fut in as_completed(futures):
+            row = fut.result()
+            rows.append(row)
+            est = row.get("estimate", {})
+            print(f"{row['style']:15s} {row['size']} seed {row['seed']}: exit {row['exit']} "
+                  f"f {est.get('f', float('nan')):.1f} (truth {row['truth']['f']:.1f}, {row.get('f_error_pct', 0):+.1f} %) "
+                  f"determined {row.get('determined')} inside {sum(row.get('inside', {}).values())}/5 "
+                  f"filter-inside {sum(row.get('inside_filter', {}).values())}/5 {row['wall_s']} s "
+                  f"{row.get('peak_rss_mb')} MB", flush=True)
+            doc = write(args, rows, started, len(jobs))  # after every run: a partial result survives
+    print(json.dumps(doc["summary"], indent=1))
+
+
+def write(args: argparse.Namespace, rows: list[dict], started: float, planned: int) -> dict:
+    rows = sorted(rows, key=lambda r: (r["style"], r["size"], r["seed"]))
+    doc = {"benchmark": "bench_selfcalib_realistic", "args": vars(args), "planned": planned,
+           "total_wall_s": round(time.perf_counter() - started, 1), "cpu_count": os.cpu_count(),
+           "load_average_at_end": os.getloadavg(), "summary": summarise(rows), "runs": rows}
+    Path(args.out).write_text(json.dumps(doc, indent=1))
+    return doc
+
+
+if __name__ == "__main__":
+    main()
