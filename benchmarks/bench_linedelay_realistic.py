@@ -33,16 +33,20 @@ DELAYS_US = (20.0, 30.0, 40.0)
 FIRST_SEED = 1200   # fresh: no other test or benchmark uses these
 
 
-def cases(count: int, static: int) -> list[dict]:
-    """count moving videos cycling styles x sizes x fps x delays, then `static` near-static ones."""
+def cases(count: int, static: int, first_seed: int = FIRST_SEED, durations_s: tuple = ()) -> list[dict]:
+    """count moving videos cycling styles x sizes x fps x delays, then `static` near-static ones.
+    durations_s: each video's length drawn from these (seeded by its seed); empty = --duration."""
     out = []
     for k in range(count):
-        out.append({"name": f"v{k:02d}", "seed": FIRST_SEED + k, "style": STYLES[k % 3],
+        out.append({"name": f"v{k:02d}", "seed": first_seed + k, "style": STYLES[k % 3],
                     "size": SIZES[(k // 3) % 2], "fps": FPS[(k // 6) % 3] if k % 5 else FPS[k % 3],
                     "line_delay_us": DELAYS_US[(k // 2) % 3]})
     for k in range(static):
-        out.append({"name": f"s{k:02d}", "seed": FIRST_SEED + 500 + k, "style": "near-static",
+        out.append({"name": f"s{k:02d}", "seed": first_seed + 500 + k, "style": "near-static",
                     "size": SIZES[k % 2], "fps": 30.0, "line_delay_us": 30.0})
+    for case in out:
+        if durations_s:
+            case["duration_s"] = float(np.random.default_rng([case["seed"], 0x445552]).choice(durations_s))
     return out
 
 
@@ -51,7 +55,7 @@ def render(case: dict, videos: Path, duration_s: float) -> Path:
     if (folder / "truth.json").is_file():
         return folder
     render_realistic_video(folder, line_delay_s=case["line_delay_us"] * 1e-6, fps=case["fps"], size=case["size"],
-                           duration_s=duration_s, seed=case["seed"], motion_style=case["style"], supersample=1,
+                           duration_s=case.get("duration_s", duration_s), seed=case["seed"], motion_style=case["style"], supersample=1,
                            workers=2)
     return folder
 
@@ -109,14 +113,18 @@ def main() -> int:
     parser.add_argument("--videos", default="/tmp/rscalib_bench_realistic")
     parser.add_argument("--count", type=int, default=30)
     parser.add_argument("--static", type=int, default=4)
-    parser.add_argument("--duration", type=float, default=6.0)
+    parser.add_argument("--duration", type=float, default=6.0, help="seconds of every video (6)")
+    parser.add_argument("--durations", default="", help="comma-separated lengths (s) drawn per video instead, "
+                        "e.g. 10,15,20 (docs/capture.md recommends 10-30 s)")
+    parser.add_argument("--seed0", type=int, default=FIRST_SEED, help="first seed: change it for fresh videos")
     parser.add_argument("--render", action="store_true", help="render missing videos, then stop")
     parser.add_argument("--only", default=None, help="comma-separated case names")
     parser.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_linedelay_realistic.json"))
     parser.add_argument("extra", nargs="*", help="more `rscalib linedelay` options (after --)")
     args = parser.parse_args()
     videos = Path(args.videos)
-    todo = cases(args.count, args.static)
+    durations = tuple(float(x) for x in args.durations.split(",") if x.strip())
+    todo = cases(args.count, args.static, args.seed0, durations)
     if args.only:
         names = set(args.only.split(","))
         todo = [c for c in todo if c["name"] in names]

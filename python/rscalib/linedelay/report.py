@@ -105,6 +105,12 @@ def verdict(result: Estimate) -> Verdict:
                        "the estimate; record longer or with faster motion")
     if not result.converged:
         reasons.append("the solver did not report convergence")
+    structured = (check is not None and check.get("agree") is False) or not 0.7 <= result.normalised_cost <= 1.5
+    if structured and getattr(result, "intrinsics", None) is None and hasattr(result, "intrinsics"):
+        # a camera that is slightly off is what most often makes the halves disagree (docs/experiments.md,
+        # "Joint refinement of the intrinsics"): say the next step in the CLI's words
+        reasons.append("the first suspect is the camera file: run again with --refine-intrinsics (the camera "
+                       "file becomes a prior and is refined with the line delay)")
     trust = not reasons
     headline = (f"Line delay {_us(result.line_delay_s)} ± {_us(result.line_delay_std_s)} µs/row "
                 f"(readout {result.readout_time_s * 1e3:.3f} ms): "

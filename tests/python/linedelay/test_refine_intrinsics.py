@@ -158,3 +158,29 @@ def test_the_flag_needs_the_spline_and_its_prior_needs_the_flag():
         _refine_options(args)
     args = build_parser().parse_args(["linedelay", "v.avi", "--target", "t.yaml", "--camera", "c.yaml", "--out", "o"])
     assert _refine_options(args) == {}
+
+
+def _verdict_of(self_check, normalised_cost=1.0, **extra):
+    from types import SimpleNamespace
+
+    from rscalib.linedelay.report import verdict
+
+    uv = np.c_[np.linspace(0, 640, 50), np.linspace(10, 470, 50)]
+    result = SimpleNamespace(determined=True, normalised_cost=normalised_cost, frames_used=100, frames_total=100,
+                             used_observations=SimpleNamespace(uv=uv), rows=480, self_check=self_check,
+                             line_delay_std_s=1e-8, line_delay_s=30e-6, converged=True, readout_time_s=0.0144,
+                             **extra)
+    return verdict(result)
+
+
+def test_a_failed_self_check_names_the_camera_and_the_flag_first_suspect():
+    halves = [{"line_delay_s": 30.4e-6, "line_delay_std_s": 3e-8}, {"line_delay_s": 29.9e-6, "line_delay_std_s": 3e-8}]
+    disagree = {"agree": False, "halves": halves, "z": 9.9, "widen": 9.9}
+    v = _verdict_of(disagree, intrinsics=None)
+    assert not v.trust and any("--refine-intrinsics" in r for r in v.reasons)
+    # already refined, or a trajectory model without the option: no such advice
+    assert not any("--refine-intrinsics" in r for r in _verdict_of(disagree, intrinsics={"fx": 1}).reasons)
+    assert not any("--refine-intrinsics" in r for r in _verdict_of(disagree).reasons)
+    # every check passed: trusted, nothing to suggest
+    v = _verdict_of({"agree": True}, intrinsics=None)
+    assert v.trust and not v.reasons
