@@ -275,6 +275,7 @@ class SceneRealism:
     brightness: float = 0.85                 # mean exposure level before the gain
     supersampling: int = 1                   # the exposure samples also smooth edges
     texels_per_m: float = 200.0              # texture resolution of the room's planes
+    room_size_m: tuple = ROOM_SIZE_M         # length x, width y, height z
     data_dir: Optional[str] = None           # photographs (default: shared_data_dir())
     phone: RealismOptions = field(default_factory=_phone_defaults)
 
@@ -319,7 +320,7 @@ def render_realistic_scene(out_dir: Union[str, Path], style: str = "look-around"
                          else "procedural (no photographs: shared data not found)")
     elif realism.textures != "procedural":
         raise InputError(f"unknown textures {realism.textures!r} (photo, procedural)")
-    scene = room_scene(seed, size_m=ROOM_SIZE_M, texels_per_m=realism.texels_per_m, texture_fn=tiles if tiles is not None else procedural_texture)
+    scene = room_scene(seed, size_m=realism.room_size_m, texels_per_m=realism.texels_per_m, texture_fn=tiles if tiles is not None else procedural_texture)
     trajectory = StyledRoomMotion(style, seed, duration_s)
     renderer = SceneRenderer(camera, scene, realism.supersampling, threads=threads)
 
