@@ -14,7 +14,6 @@ all: install
 
 deps:
 	bash scripts/install-system-deps.sh
-	bash scripts/install-test-consumers.sh
 
 # Pinned: the checked-in _core.pyi and the lint verdicts depend on these tools' versions.
 $(VENV)/.deps-stamp: pyproject.toml Makefile

@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
-# Installs the Debian packages rscalib builds against. Idempotent: apt runs only when
+# Installs the Debian packages rscalib builds and tests against. Idempotent: apt runs only when
 # something is missing. Needs root (or sudo) on Debian/Ubuntu.
 set -euo pipefail
 
 packages=(g++ make libceres-dev libeigen3-dev libsuitesparse-dev libgtest-dev clang-format)
+# The real consumers of our exported camera files, for the tests (docs/formats.md): mrcal (PyPI has no
+# wheel for it) and ROS's camera_info parser. They install for the system Python; the tests call it.
+packages+=(python3-mrcal python3-camera-calibration-parsers)
 python3 -c "import venv, ensurepip" 2>/dev/null || packages+=(python3-venv)
 command -v python3 >/dev/null || packages+=(python3 python3-dev python3-venv)
 

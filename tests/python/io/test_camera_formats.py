@@ -3,7 +3,7 @@ written, read back and projected (round trips), and fed to the real consumers wh
 has them:
 
 - OpenCV: cv2.FileStorage and cv2.projectPoints / cv2.fisheye.projectPoints (the venv's opencv);
-- mrcal: Debian's python3-mrcal (system Python; `scripts/install-test-consumers.sh`): mrcal.cameramodel,
+- mrcal: Debian's python3-mrcal (system Python; `scripts/install-system-deps.sh`): mrcal.cameramodel,
   mrcal.project, mrcal.compute_chessboard_corners on our corners.vnl, and models mrcal wrote;
 - COLMAP: pycolmap from PyPI: Reconstruction.read_text on our cameras.txt, Camera.img_from_cam, and
   cameras.txt files pycolmap wrote for each model we read;
@@ -84,10 +84,10 @@ def run_system_python(script: str, *args) -> str:
 
 
 needs_mrcal = pytest.mark.skipif(not system_python_has("mrcal"),
-                                 reason="Debian's python3-mrcal is not installed (scripts/install-test-consumers.sh)")
+                                 reason="Debian's python3-mrcal is not installed (scripts/install-system-deps.sh)")
 needs_ros = pytest.mark.skipif(not system_python_has("camera_calibration_parsers"),
                                reason="Debian's python3-camera-calibration-parsers is not installed "
-                                      "(scripts/install-test-consumers.sh)")
+                                      "(scripts/install-system-deps.sh)")
 
 
 # -- round trips: write -> read -> project, every format and model ---------------------------------
