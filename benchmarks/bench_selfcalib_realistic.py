@@ -15,6 +15,7 @@ whether the truth is inside, the "determined" verdict, wall time and peak RSS (/
 Usage: PYTHONPATH=python .venv/bin/python benchmarks/bench_selfcalib_realistic.py
            [--seeds 5] [--seed0 1100] [--frames 200] [--workers 2] [--cache /tmp/rscalib_h11_selfcalib_realistic]
            [--out benchmarks/results/bench_selfcalib_realistic.json]
+       --feature-level: the filter alone on true correspondences of the same motions (320x240, no images)
 Photographs: $RSCALIB_SHARED_DATA, else ../shared/data beside the repository (worktrees: set the variable).
 """
 from __future__ import annotations
@@ -120,6 +121,40 @@ def summarise(rows: list[dict]) -> dict:
     return summary
 
 
+def feature_level(seeds: range, frames: int) -> list[dict]:
+    """The filter alone on the same motions and room: true correspondences of points on the room's
+    planes (0.5 px noise, global shutter), the default bank options; no images (docs/sog.md §16)."""
+    import numpy as np
+
+    from rscalib.selfcalib.calibrate import default_options
+    from rscalib.selfcalib.driver import run_bank
+    from rscalib.selfcalib.prior import make_bank
+    from rscalib.sim.scene_features import PAPER_CAMERA, TrueCorrespondences, simulate_sequence
+    from rscalib.sim.scene_realism import ROOM_SIZE_M, StyledRoomMotion
+
+    rows = []
+    for style in STYLES:
+        for seed in seeds:
+            rng = np.random.default_rng([0xFEA7, seed])
+            lx, ly, lz = ROOM_SIZE_M
+            points = rng.uniform(size=(4000, 3)) * [lx, ly, lz] - [lx / 2, ly / 2, 0.0]
+            face = rng.integers(6, size=len(points))  # snap each point onto one of the six planes
+            for k, (axis, value) in enumerate([(2, 0.0), (2, lz), (0, -lx / 2), (0, lx / 2), (1, -ly / 2), (1, ly / 2)]):
+                points[face == k, axis] = value
+            motion = StyledRoomMotion(style, seed, frames / 30.0)
+            source = TrueCorrespondences(simulate_sequence(duration_s=frames / 30.0, seed=seed, points_w=points,
+                                                           motion=motion))
+            bank = make_bank(320, 240, pixel_size_mm(320), options=default_options())
+            history = run_bank(bank, source.frames(), source)
+            f, (lo, hi) = history.mean[-1, 0], history.bounds_99[-1, 0]
+            rows.append({"style": style, "seed": seed, "f": f, "f_error_pct": 100 * (f / PAPER_CAMERA.f - 1),
+                         "f_bounds_99": [lo, hi], "inside": bool(lo <= PAPER_CAMERA.f <= hi),
+                         "gaussians_left": bank.num_gaussians})
+            print(f"feature level {style:15s} seed {seed}: f {f:.1f} ({rows[-1]['f_error_pct']:+.1f} %) "
+                  f"[{lo:.1f}, {hi:.1f}] gaussians {bank.num_gaussians}", flush=True)
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=5)
@@ -128,7 +163,12 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--cache", default="/tmp/rscalib_h11_selfcalib_realistic")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "bench_selfcalib_realistic.json"))
+    ap.add_argument("--feature-level", action="store_true",
+                    help="only the filter on true correspondences of the same motions (no images); prints, writes nothing")
     args = ap.parse_args()
+    if args.feature_level:
+        feature_level(range(args.seed0, args.seed0 + args.seeds), args.frames)
+        return
     jobs = [(style, size, args.seed0 + k, args.frames, args.cache) for k in range(args.seeds) for size in SIZES
             for style in STYLES]
     started = time.perf_counter()
