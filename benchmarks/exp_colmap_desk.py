@@ -126,7 +126,8 @@ def main() -> None:
             lines.append(f"| COLMAP step {r['step']} | 0 registered | — | — | — | — | {r['seconds']:.0f} s |")
             continue
         pp = "refined" if r["refine_principal_point"] else "held at the centre"
-        lines.append(f"| COLMAP SIMPLE_RADIAL, every {r["step"]}{"rd" if r["step"] == 3 else "nd" if r["step"] == 2 else "th"} frame, principal point {pp} | {r['registered']}/"
+        nth = {2: "2nd", 3: "3rd"}.get(r["step"], f"{r['step']}th")
+        lines.append(f"| COLMAP SIMPLE_RADIAL, every {nth} frame, principal point {pp} | {r['registered']}/"
                      f"{r['images']} | {r['f']:.1f} | {100 * r['f_rel_error']:+.1f} % | {r['cx']:.1f}, {r['cy']:.1f} | "
                      f"{r['c_error_px'][0]:+.1f}, {r['c_error_px'][1]:+.1f} | {r['seconds']:.0f} s |")
     if ours is not None:
