@@ -10,6 +10,10 @@
 #include "rscalib/rs/line_delay_solver.hpp"
 #include "rscalib/rs/rs_reprojection_cost.hpp"
 
+// Options are taken by value: the solve reads its own copy without the GIL.
+RSCALIB_GUARDED_CASTER(rscalib::rs::RsSolverOptions, false)
+RSCALIB_GUARDED_CASTER(rscalib::rs::RsSolveSummary, false)
+
 namespace rscalib::python {
 
 using rs::RsObservations;
@@ -90,7 +94,7 @@ void BindRs(py::module_& m) {
       "solve_line_delay",
       [](const Eigen::VectorXd& frame_time_s, const Eigen::MatrixX2d& uv,
          const Eigen::MatrixX3d& point_w, const camera::CameraModel& camera,
-         spline::CubicBSpline& trajectory, double line_delay_s, const RsSolverOptions& options) {
+         spline::CubicBSpline& trajectory, double line_delay_s, RsSolverOptions options) {
         const RsObservations obs = MakeObservations(frame_time_s, uv, point_w);
         RsSolveSummary summary;
         {
@@ -108,7 +112,7 @@ void BindRs(py::module_& m) {
       [](const Eigen::VectorXd& frame_time_s, const Eigen::MatrixX2d& uv,
          const Eigen::MatrixX3d& point_w, const camera::CameraModel& camera,
          const spline::CubicBSpline& trajectory, double line_delay_s,
-         const RsSolverOptions& options) {
+         RsSolverOptions options) {
         const RsObservations obs = MakeObservations(frame_time_s, uv, point_w);
         py::gil_scoped_release release;
         return rs::EvaluateLineDelay(obs, camera, trajectory, line_delay_s, options);

@@ -11,6 +11,11 @@
 #include "rscalib/sog/inverse_depth.hpp"
 #include "rscalib/sog/sog_bank.hpp"
 
+// predict / update / add_features run without the GIL: calls on one bank are serialised.
+RSCALIB_GUARDED_CASTER(rscalib::sog::SogBank, true)
+RSCALIB_GUARDED_CASTER(rscalib::sog::SogOptions, false)
+RSCALIB_GUARDED_CASTER(rscalib::sog::SogUpdateReport, false)
+
 namespace rscalib::python {
 
 using sog::Matrix13d;
@@ -288,7 +293,9 @@ update(ids, uv, matched); add_features(uv) when the image needs more features.)d
             b.RemoveFeatures(Ids(ids));
           },
           py::arg("ids"))
-      .def_property_readonly("options", &SogBank::options)
+      .def_property_readonly(
+          "options", [](const SogBank& b) { return SogOptions(b.options()); },
+          "a copy (the bank's own options must not change beside an update without the GIL)")
       .def_property_readonly("image_size",
                              [](const SogBank& b) { return py::make_tuple(b.width(), b.height()); })
       .def_property_readonly("pixel_size_mm",

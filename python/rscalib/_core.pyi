@@ -902,7 +902,9 @@ class SogBank:
         ...
     @property
     def options(self) -> SogOptions:
-        ...
+        """
+        a copy (the bank's own options must not change beside an update without the GIL)
+        """
     @property
     def pixel_size_mm(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[2, 1]"]:
         ...
