@@ -111,8 +111,7 @@ void BindRs(py::module_& m) {
       "evaluate_line_delay",
       [](const Eigen::VectorXd& frame_time_s, const Eigen::MatrixX2d& uv,
          const Eigen::MatrixX3d& point_w, const camera::CameraModel& camera,
-         const spline::CubicBSpline& trajectory, double line_delay_s,
-         RsSolverOptions options) {
+         const spline::CubicBSpline& trajectory, double line_delay_s, RsSolverOptions options) {
         const RsObservations obs = MakeObservations(frame_time_s, uv, point_w);
         py::gil_scoped_release release;
         return rs::EvaluateLineDelay(obs, camera, trajectory, line_delay_s, options);

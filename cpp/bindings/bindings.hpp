@@ -70,9 +70,9 @@ class GuardedCaster : public py::detail::type_caster_base<T> {
 }  // namespace rscalib::python
 
 // Use at global scope, before the class appears in any binding of the translation unit.
-#define RSCALIB_GUARDED_CASTER(Type, kSerialise)                                   \
-  namespace pybind11::detail {                                                    \
-  template <>                                                                     \
+#define RSCALIB_GUARDED_CASTER(Type, kSerialise)                                        \
+  namespace pybind11::detail {                                                          \
+  template <>                                                                           \
   class type_caster<Type> : public rscalib::python::GuardedCaster<Type, kSerialise> {}; \
   }
 

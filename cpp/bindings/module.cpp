@@ -55,7 +55,8 @@ ObjectLock::ObjectLock(const void* object) : object_(object) {
 }
 
 ObjectLock::ObjectLock(ObjectLock&& other) noexcept
-    : object_(std::exchange(other.object_, nullptr)), entry_(std::exchange(other.entry_, nullptr)) {}
+    : object_(std::exchange(other.object_, nullptr)),
+      entry_(std::exchange(other.entry_, nullptr)) {}
 
 ObjectLock& ObjectLock::operator=(ObjectLock&& other) noexcept {
   if (this != &other) {
@@ -85,8 +86,10 @@ void RefuseUninitialised(py::handle src, const std::type_info& type) {
   const py::detail::value_and_holder object = instance->get_value_and_holder(info, false);
   if (object.inst != nullptr && object.value_ptr() != nullptr) return;
   const std::string name = info->type->tp_name;
-  throw py::type_error(name + " object is not initialised (made by __new__ without __init__); "
-                       "create it with " + name + "(...)");
+  throw py::type_error(name +
+                       " object is not initialised (made by __new__ without __init__); "
+                       "create it with " +
+                       name + "(...)");
 }
 
 }  // namespace rscalib::python
