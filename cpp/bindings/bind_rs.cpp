@@ -48,7 +48,7 @@ void BindRs(py::module_& m) {
       .def_readwrite("function_tolerance", &RsSolverOptions::function_tolerance)
       .def_readwrite("gradient_tolerance", &RsSolverOptions::gradient_tolerance)
       .def_readwrite("parameter_tolerance", &RsSolverOptions::parameter_tolerance)
-      .def_readwrite("num_threads", &RsSolverOptions::num_threads)
+      .def_property("num_threads", &ThreadCount<RsSolverOptions>, &SetThreadCount<RsSolverOptions>)
       .def_readwrite("compute_covariance", &RsSolverOptions::compute_covariance)
       .def_readwrite("verbose", &RsSolverOptions::verbose)
       .def_readwrite("refine_intrinsics", &RsSolverOptions::refine_intrinsics,

@@ -32,7 +32,8 @@ void BindRsLinear(py::module_& m) {
       .def_readwrite("function_tolerance", &LinearInterpOptions::function_tolerance)
       .def_readwrite("gradient_tolerance", &LinearInterpOptions::gradient_tolerance)
       .def_readwrite("parameter_tolerance", &LinearInterpOptions::parameter_tolerance)
-      .def_readwrite("num_threads", &LinearInterpOptions::num_threads)
+      .def_property("num_threads", &ThreadCount<LinearInterpOptions>,
+                    &SetThreadCount<LinearInterpOptions>)
       .def_readwrite("compute_covariance", &LinearInterpOptions::compute_covariance)
       .def_readwrite("verbose", &LinearInterpOptions::verbose);
 

@@ -1,5 +1,6 @@
 #pragma once
 // One binding file per area; module.cpp calls each Bind*.
+#include <string>
 #include <typeinfo>
 
 #include <pybind11/numpy.h>
@@ -24,6 +25,33 @@ void BindSog(py::module_& m);
 // Sets *was_vector when the input was 1-D so results can be returned 1-D too.
 py::ssize_t CheckRows(const DoubleArray& array, py::ssize_t width, const char* what,
                       bool* was_vector);
+
+// Item `index` of the pickled state of a `cls` object (a tuple of `size` items), as T; TypeError
+// naming the class when the tuple has another size or the item another type.
+template <typename T>
+T StateItem(const py::tuple& state, size_t size, size_t index, const char* cls) {
+  if (state.size() != size)
+    throw py::type_error(std::string(cls) + " state must be a tuple of " + std::to_string(size) +
+                         " items, got " + std::to_string(state.size()));
+  try {
+    return state[index].cast<T>();
+  } catch (const py::cast_error&) {
+    throw py::type_error(std::string(cls) + " state item " + std::to_string(index) +
+                         " has the wrong type");
+  }
+}
+
+// num_threads of the options structs: threads are created up front, so absurd counts are refused.
+constexpr int kMaxThreads = 1024;
+int CheckedThreadCount(int num_threads);
+template <typename Options>
+int ThreadCount(const Options& options) {
+  return options.num_threads;
+}
+template <typename Options>
+void SetThreadCount(Options& options, int num_threads) {
+  options.num_threads = CheckedThreadCount(num_threads);
+}
 
 // Holds the mutex of one C++ object (one mutex per object in use, recursive). If another thread
 // holds it, waits with the GIL released, so the holder can finish (it may need the GIL back).

@@ -19,6 +19,13 @@ py::ssize_t CheckRows(const DoubleArray& array, py::ssize_t width, const char* w
                    std::to_string(width) + ",)");
 }
 
+int CheckedThreadCount(int num_threads) {
+  if (num_threads < 1 || num_threads > kMaxThreads)
+    throw InputError("num_threads must be 1.." + std::to_string(kMaxThreads) + ", got " +
+                     std::to_string(num_threads));
+  return num_threads;
+}
+
 namespace {
 
 struct LockEntry {
