@@ -219,7 +219,7 @@ class RsSolverOptions:
     def num_threads(self) -> int:
         ...
     @num_threads.setter
-    def num_threads(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+    def num_threads(self, arg1: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def observation_sigma(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
@@ -396,7 +396,7 @@ class LinearInterpOptions:
     def num_threads(self) -> int:
         ...
     @num_threads.setter
-    def num_threads(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+    def num_threads(self, arg1: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def parameter_tolerance(self) -> float:
@@ -651,7 +651,7 @@ class SogOptions:
     def num_threads(self) -> int:
         ...
     @num_threads.setter
-    def num_threads(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+    def num_threads(self, arg1: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def pixel_sigma(self) -> float:
