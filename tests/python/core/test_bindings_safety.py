@@ -201,6 +201,14 @@ def _child_uninitialised():
                 bad = list(args[name])
                 bad[i] = new[cls]
                 _expect_uninitialised(failures, f"{name}(arg {i}: {cls.__name__}.__new__)", lambda b=bad, f=fn: f(*b))
+    # CameraModel is read without the GIL and without a lock because nothing can change it: a second
+    # __init__ or __setstate__ on a live instance leaves it as it was.
+    before = camera.__getstate__()
+    camera.__init__("pinhole-radtan", [100.0, 100.0, 10.0, 10.0], 20, 20)
+    camera.__setstate__(("pinhole-radtan", np.ones(9), 5, 5, np.zeros(2)))
+    after = camera.__getstate__()
+    if repr(after) != repr(before):
+        failures.append(f"CameraModel changed by a second __init__/__setstate__: {before} -> {after}")
     print("\n".join(failures) if failures else f"ok: {failures.checked} uses of uninitialised instances refused")
     return 1 if failures else 0
 
