@@ -12,6 +12,7 @@ derandomised seed and a bounded number of examples, so a segfault fails the test
 the run. On a crash the child's faulthandler traceback names the entry point.
 """
 import math
+import os
 import re
 import subprocess
 import sys
@@ -127,9 +128,12 @@ def _child(target):  # noqa: C901 - one strategy per entry point, kept together 
         except ACCEPTED:
             outcomes["refused"] += 1
 
+    # RSCALIB_FUZZ_SCALE=10 for a longer campaign by hand (same seeds, more examples).
+    examples = int(TARGETS[target] * float(os.environ.get("RSCALIB_FUZZ_SCALE", "1")))
+
     def fuzz(strategy):
         def decorate(body):
-            return settings(max_examples=TARGETS[target], derandomize=True, deadline=None, database=None,
+            return settings(max_examples=examples, derandomize=True, deadline=None, database=None,
                             suppress_health_check=list(HealthCheck))(given(strategy)(body))
         return decorate
 
