@@ -297,6 +297,50 @@ def _child_spline_threads():
     return 1 if errors else 0
 
 
+def _child_solve_threads():
+    """solve_line_delay refines a trajectory without the GIL while other threads evaluate it: every
+    evaluation must see the trajectory before or after the solve, never half-way."""
+    rng = np.random.default_rng(1)
+    camera = _core.CameraModel("pinhole-radtan", [300.0, 300.0, 160.0, 120.0], 320, 240)
+    grid = np.stack(np.meshgrid(np.linspace(-0.3, 0.3, 6), np.linspace(-0.2, 0.2, 5)), -1).reshape(-1, 2)
+    points = np.column_stack([grid, np.zeros(len(grid))])
+    truth = _core.BSpline.uniform(0.0, 2.0, 20, 6)
+    control = np.tile([0.0, 0.0, 1.0, 0.0, 0.0, 0.0], (23, 1))
+    control[:, [0, 1, 3, 4, 5]] += rng.normal(0, 0.05, (23, 5))
+    truth.control_points = control
+    frame_times = np.linspace(0.05, 1.9, 60)
+    rotations, translations = _core.poses_at(truth, frame_times)
+    uv = np.vstack([camera.project(points @ r.T + p) for r, p in zip(rotations, translations)])
+    uv += rng.normal(0, 0.3, uv.shape)
+    times = np.linspace(0.0, 2.0, 2001)
+    errors = []
+    for trial in range(3):
+        trajectory = truth.copy()
+        trajectory.control_points = control + [0.01, 0.01, 0.01, 0.0, 0.0, 0.0]
+        before = trajectory.evaluate(times)
+        seen = []
+        done = threading.Event()
+
+        def work(index, trajectory=trajectory, seen=seen, done=done):
+            while not done.is_set():
+                seen.append(trajectory.evaluate(times))
+
+        readers = [threading.Thread(target=work, args=(i,)) for i in range(2)]
+        for t in readers:
+            t.start()
+        _core.solve_line_delay(np.repeat(frame_times, len(points)), uv, np.tile(points, (60, 1)), camera,
+                               trajectory, 0.0, _core.RsSolverOptions())
+        done.set()
+        for t in readers:
+            t.join()
+        after = trajectory.evaluate(times)
+        torn = sum(not (np.array_equal(v, before) or np.array_equal(v, after)) for v in seen)
+        if torn or np.array_equal(before, after):
+            errors.append(f"trial {trial}: {torn} of {len(seen)} evaluations saw the solve half-way")
+    print("\n".join(errors) if errors else "ok")
+    return 1 if errors else 0
+
+
 # ------------------------------------------------------------------------------------ tests
 
 
@@ -313,7 +357,11 @@ def test_insert_knot_beside_evaluate_from_threads():
     _run_child("spline_threads")
 
 
+def test_evaluate_beside_solve_line_delay_from_threads():
+    _run_child("solve_threads")
+
+
 if __name__ == "__main__":
     children = {"uninitialised": _child_uninitialised, "bank_threads": _child_bank_threads,
-                "spline_threads": _child_spline_threads}
+                "spline_threads": _child_spline_threads, "solve_threads": _child_solve_threads}
     sys.exit(children[sys.argv[1]]())
