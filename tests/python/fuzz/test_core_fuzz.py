@@ -155,21 +155,37 @@ def _child(target):  # noqa: C901 - one strategy per entry point, kept together 
     uv = pinhole.project(points_w + [0.0, 0.0, 1.0])
     sigmas = np.array([7.5, 10 / 3, 10 / 3, 0.02, 0.00225])
 
-    def options(cls, fields):
-        o = cls()
-        for name, value in fields.items():
-            setattr(o, name, value)
-        return o
+    def wild_options(cls, lengths):
+        """An options object with about a quarter of its fields (every settable field is a candidate, by
+        the type of its default) set to wild values; setting may itself be refused. `lengths`: valid
+        lengths of array fields (e.g. one sigma per observation), so those are reached too."""
+        defaults = cls()
+        strategies = {}
+        for name, member in vars(cls).items():
+            if not (isinstance(member, property) and member.fset):
+                continue
+            value = getattr(defaults, name)
+            if isinstance(value, bool):
+                strategies[name] = st.booleans()
+            elif isinstance(value, int):
+                strategies[name] = ints
+            elif isinstance(value, float):
+                strategies[name] = st.one_of(floats, ints)
+            elif isinstance(value, str):
+                strategies[name] = st.one_of(st.sampled_from(["none", "huber", "cauchy"]), st.text(max_size=6))
+            elif isinstance(value, list):
+                strategies[name] = list_of(ints)
+            else:
+                like = np.ones(lengths.get(name, value.shape)) if name in lengths else value
+                strategies[name] = wild_array(like=like if np.size(like) else None)
 
-    def options_or_none(cls, wild_fields):
-        """An options object with some fields set to wild values (setting may itself be refused)."""
         @st.composite
         def build(draw):
             o = cls()
-            for name in sorted(wild_fields):
-                if draw(st.integers(0, 3)) == 0:  # about a quarter of the fields at once
+            for name in sorted(strategies):
+                if draw(st.integers(0, 3)) == 0:
                     try:
-                        setattr(o, name, draw(wild_fields[name]))
+                        setattr(o, name, draw(strategies[name]))
                     except ACCEPTED:
                         pass
             return o
@@ -283,18 +299,13 @@ def _child(target):  # noqa: C901 - one strategy per entry point, kept together 
     elif target == "line_delay":
         valid = {"frame_time_s": frame_times, "uv": uv, "point_w": points_w, "camera": pinhole,
                  "trajectory": None, "line_delay_s": 0.0, "options": _core.RsSolverOptions()}
-        option_fields = {
-            "pixel_sigma": numbers, "observation_sigma": list_of(floats), "max_rs_gain": numbers,
-            "motion_prior_q": list_of(floats), "use_motion_prior": st.booleans(), "robust_loss": st.text(max_size=6),
-            "robust_loss_scale": numbers, "max_iterations": ints, "max_outer_iterations": ints,
-            "function_tolerance": numbers, "num_threads": ints, "refine_intrinsics": st.booleans(),
-            "intrinsics_prior_mean": list_of(floats), "fixed_intrinsics": list_of(ints),
-            "intrinsics_prior_covariance": wild_array(4), "standardise_errors": st.booleans(),
-            "compute_covariance": st.booleans(), "estimate_line_delay": st.booleans()}
+        options = wild_options(_core.RsSolverOptions, {"observation_sigma": 27, "motion_prior_q": 6,
+                                                       "intrinsics_prior_mean": 9,
+                                                       "intrinsics_prior_covariance": (9, 9)})
         wild = {"frame_time_s": wild_array(like=frame_times), "uv": wild_array(2, like=uv),
                 "point_w": wild_array(3, like=points_w), "camera": st.sampled_from(cameras),
                 "trajectory": st.sampled_from([(6, 4), (3, 4), (6, 1), (1, 1)]),
-                "line_delay_s": numbers, "options": options_or_none(_core.RsSolverOptions, option_fields)}
+                "line_delay_s": numbers, "options": options}
 
         @fuzz(st.tuples(st.booleans(), mutated(valid, wild)))
         def body(case):
@@ -322,16 +333,12 @@ def _child(target):  # noqa: C901 - one strategy per entry point, kept together 
                  "frame_time_s": np.array([0.2, 0.5, 0.8]), "camera": pinhole,
                  "frame_poses": np.tile([0.0, 0.0, 1.0, 0.0, 0.0, 0.0], (3, 1)), "line_delay_s": 0.0,
                  "options": _core.LinearInterpOptions()}
-        option_fields = {"pixel_sigma": numbers, "max_rs_gain": numbers, "max_frame_interval_s": numbers,
-                         "robust_loss": st.text(max_size=6), "robust_loss_scale": numbers, "max_iterations": ints,
-                         "num_threads": ints, "standardise_errors": st.booleans(),
-                         "compute_covariance": st.booleans(), "estimate_line_delay": st.booleans()}
         wild = {"frame_index": st.one_of(wild_array(), hnp.arrays(np.int32, 27, elements=st.integers(-5, 5))),
                 "uv": wild_array(2, like=uv), "point_w": wild_array(3, like=points_w),
                 "frame_time_s": wild_array(like=valid["frame_time_s"]),
                 "frame_poses": wild_array(6, like=valid["frame_poses"]), "line_delay_s": numbers,
                 "camera": st.sampled_from(cameras),
-                "options": options_or_none(_core.LinearInterpOptions, option_fields)}
+                "options": wild_options(_core.LinearInterpOptions, {})}
 
         @fuzz(mutated(valid, wild))
         def body(args):
@@ -341,13 +348,7 @@ def _child(target):  # noqa: C901 - one strategy per entry point, kept together 
         valid = {"options": _core.SogOptions(), "initial_means": np.array([[200.0, 160, 120, 0, 0]]),
                  "initial_covs": np.diag(sigmas ** 2)[None], "initial_weights": np.ones(1),
                  "image_size": (320, 240), "pixel_size_mm": 0.0112}
-        option_fields = {name: numbers for name in [
-            "pixel_sigma", "accel_sigma", "angular_accel_sigma", "initial_velocity_sigma", "initial_inverse_depth",
-            "initial_inverse_depth_sigma", "linearity_threshold", "deletion_min_predictions", "max_features",
-            "ransac_hypotheses", "ransac_threshold_px", "gate_chi2", "update_iterations", "likelihood_temperature",
-            "sprt_alpha", "sprt_beta", "guard_min_frames", "min_log_weight", "merge_mahalanobis2", "num_threads"]}
-        option_fields["calibration_random_walk"] = wild_array()
-        wild = {"options": options_or_none(_core.SogOptions, option_fields),
+        wild = {"options": wild_options(_core.SogOptions, {}),
                 "initial_means": wild_array(5, like=valid["initial_means"]),
                 "initial_covs": wild_array(like=valid["initial_covs"]),
                 "initial_weights": wild_array(like=valid["initial_weights"]),
