@@ -58,7 +58,7 @@ def _child(target):  # noqa: C901 - one strategy per entry point, kept together 
     import faulthandler
     import resource
 
-    from hypothesis import HealthCheck, given, settings
+    from hypothesis import HealthCheck, given, note, settings
     from hypothesis import strategies as st
     from hypothesis.extra import numpy as hnp
 
@@ -182,12 +182,15 @@ def _child(target):  # noqa: C901 - one strategy per entry point, kept together 
         @st.composite
         def build(draw):
             o = cls()
+            drawn = {}
             for name in sorted(strategies):
                 if draw(st.integers(0, 3)) == 0:
+                    drawn[name] = draw(strategies[name])
                     try:
-                        setattr(o, name, draw(strategies[name]))
+                        setattr(o, name, drawn[name])
                     except ACCEPTED:
                         pass
+            note(f"{cls.__name__} fields set: {drawn}")  # shown with a failing example
             return o
         return build()
 
