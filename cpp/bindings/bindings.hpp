@@ -41,7 +41,8 @@ T StateItem(const py::tuple& state, size_t size, size_t index, const char* cls) 
   }
 }
 
-// num_threads of the options structs: threads are created up front, so absurd counts are refused.
+// num_threads of the options structs: pools of that many threads are made, so absurd counts are
+// refused (2**31 - 1 made Ceres throw std::bad_alloc).
 constexpr int kMaxThreads = 1024;
 int CheckedThreadCount(int num_threads);
 template <typename Options>
@@ -78,7 +79,8 @@ void RefuseUninitialised(py::handle src, const std::type_info& type);
 // The caster of every bound class (RSCALIB_GUARDED_CASTER): refuses uninitialised instances and,
 // for kSerialise classes, holds the object's lock from argument loading until the call returns, so
 // methods that release the GIL never run beside another call on the same object. At most one
-// kSerialise object may be an argument of one function (else two threads could lock in turn).
+// kSerialise object may be an argument of one function (else two threads could each hold one and
+// wait for the other). A class bound without it fails tests/python/core/test_bindings_safety.py.
 template <typename T, bool kSerialise>
 class GuardedCaster : public py::detail::type_caster_base<T> {
  public:
