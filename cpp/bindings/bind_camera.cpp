@@ -144,8 +144,11 @@ Points that cannot be projected give NaN.
                                   Eigen::Vector2d(c.pixel_size_mm()));
           },
           [](const py::tuple& s) {
-            return CameraModel(s[0].cast<std::string>(), s[1].cast<Eigen::VectorXd>(),
-                               s[2].cast<int>(), s[3].cast<int>(), s[4].cast<Eigen::Vector2d>());
+            const char* cls = "CameraModel";
+            return CameraModel(StateItem<std::string>(s, 5, 0, cls),
+                               StateItem<Eigen::VectorXd>(s, 5, 1, cls),
+                               StateItem<int>(s, 5, 2, cls), StateItem<int>(s, 5, 3, cls),
+                               StateItem<Eigen::Vector2d>(s, 5, 4, cls));
           }))
       .def("__repr__", [](const CameraModel& c) {
         std::string text = "CameraModel('" + c.name() + "', [";

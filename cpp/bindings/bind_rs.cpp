@@ -10,6 +10,10 @@
 #include "rscalib/rs/line_delay_solver.hpp"
 #include "rscalib/rs/rs_reprojection_cost.hpp"
 
+// Options are taken by value: the solve reads its own copy without the GIL.
+RSCALIB_GUARDED_CASTER(rscalib::rs::RsSolverOptions, false)
+RSCALIB_GUARDED_CASTER(rscalib::rs::RsSolveSummary, false)
+
 namespace rscalib::python {
 
 using rs::RsObservations;
@@ -44,7 +48,7 @@ void BindRs(py::module_& m) {
       .def_readwrite("function_tolerance", &RsSolverOptions::function_tolerance)
       .def_readwrite("gradient_tolerance", &RsSolverOptions::gradient_tolerance)
       .def_readwrite("parameter_tolerance", &RsSolverOptions::parameter_tolerance)
-      .def_readwrite("num_threads", &RsSolverOptions::num_threads)
+      .def_property("num_threads", &ThreadCount<RsSolverOptions>, &SetThreadCount<RsSolverOptions>)
       .def_readwrite("compute_covariance", &RsSolverOptions::compute_covariance)
       .def_readwrite("verbose", &RsSolverOptions::verbose)
       .def_readwrite("refine_intrinsics", &RsSolverOptions::refine_intrinsics,
@@ -90,7 +94,7 @@ void BindRs(py::module_& m) {
       "solve_line_delay",
       [](const Eigen::VectorXd& frame_time_s, const Eigen::MatrixX2d& uv,
          const Eigen::MatrixX3d& point_w, const camera::CameraModel& camera,
-         spline::CubicBSpline& trajectory, double line_delay_s, const RsSolverOptions& options) {
+         spline::CubicBSpline& trajectory, double line_delay_s, RsSolverOptions options) {
         const RsObservations obs = MakeObservations(frame_time_s, uv, point_w);
         RsSolveSummary summary;
         {
@@ -107,8 +111,7 @@ void BindRs(py::module_& m) {
       "evaluate_line_delay",
       [](const Eigen::VectorXd& frame_time_s, const Eigen::MatrixX2d& uv,
          const Eigen::MatrixX3d& point_w, const camera::CameraModel& camera,
-         const spline::CubicBSpline& trajectory, double line_delay_s,
-         const RsSolverOptions& options) {
+         const spline::CubicBSpline& trajectory, double line_delay_s, RsSolverOptions options) {
         const RsObservations obs = MakeObservations(frame_time_s, uv, point_w);
         py::gil_scoped_release release;
         return rs::EvaluateLineDelay(obs, camera, trajectory, line_delay_s, options);

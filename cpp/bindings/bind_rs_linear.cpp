@@ -5,6 +5,10 @@
 #include "bindings.hpp"
 #include "rscalib/rs/linear_interp_solver.hpp"
 
+// Options are taken by value: the solve reads its own copy without the GIL.
+RSCALIB_GUARDED_CASTER(rscalib::rs::LinearInterpOptions, false)
+RSCALIB_GUARDED_CASTER(rscalib::rs::LinearInterpSummary, false)
+
 namespace rscalib::python {
 
 using rs::LinearInterpOptions;
@@ -28,7 +32,8 @@ void BindRsLinear(py::module_& m) {
       .def_readwrite("function_tolerance", &LinearInterpOptions::function_tolerance)
       .def_readwrite("gradient_tolerance", &LinearInterpOptions::gradient_tolerance)
       .def_readwrite("parameter_tolerance", &LinearInterpOptions::parameter_tolerance)
-      .def_readwrite("num_threads", &LinearInterpOptions::num_threads)
+      .def_property("num_threads", &ThreadCount<LinearInterpOptions>,
+                    &SetThreadCount<LinearInterpOptions>)
       .def_readwrite("compute_covariance", &LinearInterpOptions::compute_covariance)
       .def_readwrite("verbose", &LinearInterpOptions::verbose);
 
@@ -62,7 +67,7 @@ void BindRsLinear(py::module_& m) {
       [](const Eigen::VectorXi& frame_index, const Eigen::MatrixX2d& uv,
          const Eigen::MatrixX3d& point_w, const Eigen::VectorXd& frame_time_s,
          const camera::CameraModel& camera, rs::FramePoseMatrix frame_poses, double line_delay_s,
-         const LinearInterpOptions& options) {
+         LinearInterpOptions options) {
         const rs::LinearInterpObservations obs{frame_index, uv, point_w};
         LinearInterpSummary summary;
         {

@@ -8,8 +8,14 @@
 
 #include "bindings.hpp"
 #include "rscalib/core/error.hpp"
+#include "rscalib/core/memory_limit.hpp"
 #include "rscalib/sog/inverse_depth.hpp"
 #include "rscalib/sog/sog_bank.hpp"
+
+// predict / update / add_features run without the GIL: calls on one bank are serialised.
+RSCALIB_GUARDED_CASTER(rscalib::sog::SogBank, true)
+RSCALIB_GUARDED_CASTER(rscalib::sog::SogOptions, false)
+RSCALIB_GUARDED_CASTER(rscalib::sog::SogUpdateReport, false)
 
 namespace rscalib::python {
 
@@ -72,6 +78,13 @@ std::unique_ptr<SogBank> MakeBank(const SogOptions& options, const DoubleArray& 
                                   const DoubleArray& covariances, const DoubleArray& weights,
                                   const std::pair<int, int>& image_size,
                                   const DoubleArray& pixel_size) {
+  // Counts of work per frame: refused when absurd, before a frame takes hours.
+  if (options.update_iterations < 1 || options.update_iterations > 100)
+    throw InputError("SogOptions.update_iterations must be 1..100, got " +
+                     std::to_string(options.update_iterations));
+  if (options.ransac_hypotheses < 0 || options.ransac_hypotheses > 100000)
+    throw InputError("SogOptions.ransac_hypotheses must be 0..100000, got " +
+                     std::to_string(options.ransac_hypotheses));
   if (means.ndim() != 2 || means.shape(1) != 5)
     throw InputError("initial_means must have shape (N, 5)");
   const py::ssize_t n = means.shape(0);
@@ -170,7 +183,7 @@ Options of the SOG self-calibration bank (docs/sog.md §9). SI units; pixels in 
       .def_readwrite(
           "merge_mahalanobis2", &SogOptions::merge_mahalanobis2,
           "while pruning, merge Gaussians whose calibrations are closer than this (<= 0: never)")
-      .def_readwrite("num_threads", &SogOptions::num_threads)
+      .def_property("num_threads", &ThreadCount<SogOptions>, &SetThreadCount<SogOptions>)
       .def("__repr__", [](const SogOptions& o) {
         return "SogOptions(pixel_sigma=" + std::to_string(o.pixel_sigma) +
                ", accel_sigma=" + std::to_string(o.process.accel_sigma) +
@@ -273,6 +286,12 @@ update(ids, uv, matched); add_features(uv) when the image needs more features.)d
           "add_features",
           [](SogBank& b, const DoubleArray& uv) {
             const std::vector<Eigen::Vector2d> z = Rows2(uv, "uv");
+            // Every filter keeps a dense covariance of the whole map (and builds the next one).
+            const double dim = b.map().state_dim() + 6.0 * z.size();
+            CheckMemory(2.0 * 8.0 * dim * dim * b.num_gaussians(),
+                        "SogBank.add_features: " + std::to_string(z.size()) + " features more (" +
+                            std::to_string(b.num_gaussians()) + " filters of " +
+                            std::to_string(static_cast<int64_t>(dim)) + " states)");
             std::vector<int64_t> ids;
             {
               py::gil_scoped_release release;
@@ -288,7 +307,9 @@ update(ids, uv, matched); add_features(uv) when the image needs more features.)d
             b.RemoveFeatures(Ids(ids));
           },
           py::arg("ids"))
-      .def_property_readonly("options", &SogBank::options)
+      .def_property_readonly(
+          "options", [](const SogBank& b) { return SogOptions(b.options()); },
+          "a copy (the bank's own options must not change beside an update without the GIL)")
       .def_property_readonly("image_size",
                              [](const SogBank& b) { return py::make_tuple(b.width(), b.height()); })
       .def_property_readonly("pixel_size_mm",

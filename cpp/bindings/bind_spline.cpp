@@ -1,4 +1,6 @@
 // Bindings: cubic B-spline, spline fitting and poses of a pose spline.
+#include <limits>
+
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
@@ -21,6 +23,7 @@ py::array_t<double> Evaluate(const CubicBSpline& curve, const py::object& t, int
   DoubleArray times = DoubleArray::ensure(t);
   if (!times) throw InputError("t must be a number or an array of numbers");
   const py::ssize_t count = times.size();
+  if (count > std::numeric_limits<int>::max()) throw InputError("too many times to evaluate");
   py::array_t<double> out({count, static_cast<py::ssize_t>(curve.dimension())});
   const double* in = times.data();
   double* dst = out.mutable_data();
@@ -103,8 +106,8 @@ Segment s is [breakpoints[s], breakpoints[s+1]); span = segment + 3 in the knot 
             return py::make_tuple(s.knots(), ControlPoints(s.control_points()));
           },
           [](const py::tuple& state) {
-            return CubicBSpline(state[0].cast<std::vector<double>>(),
-                                state[1].cast<ControlPoints>());
+            return CubicBSpline(StateItem<std::vector<double>>(state, 2, 0, "BSpline"),
+                                StateItem<ControlPoints>(state, 2, 1, "BSpline"));
           }))
       .def("__repr__", [](const CubicBSpline& s) {
         return "BSpline(dimension=" + std::to_string(s.dimension()) +
@@ -135,6 +138,7 @@ acceleration_weight: [] (none), [lambda] or one lambda per dimension.)doc");
       [](const CubicBSpline& pose_spline, const DoubleArray& times) {
         spline::CheckPoseSpline(pose_spline);
         const py::ssize_t count = times.size();
+        if (count > std::numeric_limits<int>::max() / 6) throw InputError("too many times");
         py::array_t<double> rotations({count, py::ssize_t{3}, py::ssize_t{3}});
         py::array_t<double> translations({count, py::ssize_t{3}});
         std::vector<double> states(static_cast<size_t>(count) * 6);

@@ -219,7 +219,7 @@ class RsSolverOptions:
     def num_threads(self) -> int:
         ...
     @num_threads.setter
-    def num_threads(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+    def num_threads(self, arg1: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def observation_sigma(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
@@ -396,7 +396,7 @@ class LinearInterpOptions:
     def num_threads(self) -> int:
         ...
     @num_threads.setter
-    def num_threads(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+    def num_threads(self, arg1: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def parameter_tolerance(self) -> float:
@@ -651,7 +651,7 @@ class SogOptions:
     def num_threads(self) -> int:
         ...
     @num_threads.setter
-    def num_threads(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+    def num_threads(self, arg1: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def pixel_sigma(self) -> float:
@@ -902,7 +902,9 @@ class SogBank:
         ...
     @property
     def options(self) -> SogOptions:
-        ...
+        """
+        a copy (the bank's own options must not change beside an update without the GIL)
+        """
     @property
     def pixel_size_mm(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[2, 1]"]:
         ...

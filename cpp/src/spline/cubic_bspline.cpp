@@ -1,11 +1,13 @@
 #include "rscalib/spline/cubic_bspline.hpp"
 
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <string>
 #include <utility>
 
 #include "rscalib/core/error.hpp"
+#include "rscalib/core/memory_limit.hpp"
 
 namespace rscalib::spline {
 
@@ -48,7 +50,15 @@ std::vector<double> CubicBSpline::ClampedKnots(const std::vector<double>& breakp
 
 CubicBSpline CubicBSpline::Uniform(double t_begin, double t_end, int num_segments, int dimension) {
   if (num_segments < 1) throw InputError("need at least one spline segment");
-  if (!(t_end > t_begin)) throw InputError("spline domain must have positive length");
+  if (dimension < 1) throw InputError("cubic B-spline needs dimension >= 1");
+  if (!(t_end > t_begin) || !std::isfinite(t_end - t_begin))
+    throw InputError("spline domain must be finite and have positive length");
+  // Breakpoints, knots and control points, counted in doubles (no int overflow below).
+  const double values = (num_segments + 1.0) * 2 + 6 + (num_segments + 3.0) * dimension;
+  CheckMemory(8.0 * values, "a uniform spline of " + std::to_string(num_segments) + " segments x " +
+                                std::to_string(dimension) + " dimensions");
+  if (num_segments > std::numeric_limits<int>::max() - 2 * kSplineOrder)
+    throw InputError("too many spline segments: " + std::to_string(num_segments));
   std::vector<double> breakpoints(num_segments + 1);
   for (int s = 0; s <= num_segments; ++s)
     breakpoints[s] = t_begin + (t_end - t_begin) * s / num_segments;

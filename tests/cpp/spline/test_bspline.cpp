@@ -1,3 +1,4 @@
+#include <limits>
 #include <random>
 
 #include <ceres/jet.h>
@@ -99,5 +100,15 @@ TEST(BSpline, RejectsBadInput) {
   Eigen::VectorXd times(2);
   times << 0.1, 0.2;
   EXPECT_THROW(FitCubicBSpline(curve.knots(), times, Eigen::MatrixXd::Zero(2, 1)),
+               rscalib::InputError);
+}
+
+TEST(BSpline, RefusesAbsurdSizesBeforeAllocating) {
+  // Petabytes: InputError from the size check, never std::bad_alloc or an out-of-memory kill.
+  const int huge = std::numeric_limits<int>::max();
+  EXPECT_THROW(CubicBSpline::Uniform(0.0, 1.0, huge / 2, 1000), rscalib::InputError);
+  EXPECT_THROW(CubicBSpline::Uniform(0.0, 1.0, 1000, huge), rscalib::InputError);
+  EXPECT_THROW(CubicBSpline::Uniform(0.0, 1.0, 4, 0), rscalib::InputError);
+  EXPECT_THROW(CubicBSpline::Uniform(0.0, std::numeric_limits<double>::infinity(), 4, 1),
                rscalib::InputError);
 }
