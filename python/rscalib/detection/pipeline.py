@@ -2,6 +2,7 @@
 worker processes, accepted detections as Observations, drops counted by reason, a cache."""
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import hashlib
 import os
@@ -93,9 +94,27 @@ def die_with_parent(parent_pid: int) -> None:
 def _worker_init(target: Target, options: DetectOptions, parent_pid: int) -> None:
     global _WORKER_DETECTOR
     die_with_parent(parent_pid)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops the workers
+    # Ctrl-C reaches the whole process group: the parent stops the workers, which must not print a
+    # KeyboardInterrupt traceback (blocked since spawn, so also during the imports before this)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     cv2.setNumThreads(1)  # one process per core already
     _WORKER_DETECTOR = Detector(target, options)
+
+
+@contextlib.contextmanager
+def _sigint_blocked():
+    """SIGINT blocked in this thread meanwhile (a child spawned meanwhile inherits the mask); a
+    Ctrl-C that arrives meanwhile is delivered when it ends."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _worker_detect(image: np.ndarray) -> FrameDetection:
@@ -156,7 +175,8 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
                 if pool is None:
                     record(info, detector.detect(frame.image))
                 else:
-                    pending.append((info, pool.submit(_worker_detect, frame.image)))
+                    with _sigint_blocked():   # a worker spawned here starts with Ctrl-C blocked (see _worker_init)
+                        pending.append((info, pool.submit(_worker_detect, frame.image)))
                     while len(pending) > 2 * workers:  # bounded: memory independent of length
                         record(*_result(pending.popleft()))
                 bar.update(state["total"] - len(pending))
