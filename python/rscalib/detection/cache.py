@@ -116,5 +116,5 @@ def load_cache(path: Path, target: Target, problems: Optional[list] = None) -> O
     except OSError:
         pass
     if problems is not None:
-        problems.append(f"detection cache {path} discarded ({reason}); detected again")
+        problems.append(f"detection cache {path} discarded: {reason}; detected again")
     return None
