@@ -61,12 +61,12 @@ def running(pid: int) -> bool:
     return stat[stat.rindex(")") + 2] != "Z"
 
 
-def start_linedelay(video: Path, out: Path, logs: Path) -> subprocess.Popen:
+def start_linedelay(video: Path, out: Path, logs: Path, quiet: bool = True) -> subprocess.Popen:
     """`rscalib linedelay` with 2 detection workers and no cache; output to files (a surviving
     worker holding a pipe would hang the test instead of failing it)."""
     argv = [sys.executable, "-m", "rscalib", "linedelay", str(video / "video.avi"), "--target",
             str(video / "target.yaml"), "--camera", str(video / "camera.yaml"), "--out", str(out), "--no-cache",
-            "--quiet", "--workers", "2"]
+            "--workers", "2"] + (["--quiet"] if quiet else [])
     return subprocess.Popen(argv, stdout=open(logs / "stdout", "w"), stderr=open(logs / "stderr", "w"),
                             env=rscalib_env(), start_new_session=True)
 
@@ -115,6 +115,24 @@ def test_a_run_stopped_in_detection_takes_its_workers_and_writes_nothing(video, 
     assert "Traceback" not in err, err
     if last_line is not None:
         assert err.strip().splitlines()[-1] == last_line
+    assert not (out / "result.json").exists()
+
+
+def test_sigterm_during_the_solve_is_exit_143_and_writes_nothing(video, tmp_path):
+    out = tmp_path / "out"
+    process = start_linedelay(video, out, tmp_path, quiet=False)
+    try:
+        deadline = time.monotonic() + 300
+        while "estimating trajectory" not in (tmp_path / "stderr").read_text():   # detection is over
+            assert process.poll() is None and time.monotonic() < deadline, (tmp_path / "stderr").read_text()
+            time.sleep(0.05)
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=60) == 143
+    finally:
+        if running(process.pid):
+            os.kill(process.pid, signal.SIGKILL)
+    err = (tmp_path / "stderr").read_text()
+    assert "Traceback" not in err and err.strip().splitlines()[-1] == "rscalib: terminated", err
     assert not (out / "result.json").exists()
 
 
