@@ -66,7 +66,8 @@ def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out")
     out = Path(out)
     absolute = Path(os.path.abspath(out))
     if os.path.lexists(absolute) and not absolute.is_dir():
-        kind = "a file" if absolute.is_file() else "not a folder (a device or special file)"
+        kind = ("a file" if absolute.is_file() else "a link to nothing" if not absolute.exists()
+                else "not a folder (a device or special file)")
         raise InputError(f"{option} {out}: exists and is {kind}; give a folder")
     resolved = absolute.resolve()
     fs_type = _mount_type(resolved)

@@ -197,7 +197,7 @@ def test_two_processes_share_one_entry_safely(tmp_path):
     whole result of one of them, never a damaged or mixed file."""
     path = tmp_path / "shared.npz"
     script = HAMMER.format(tests=str(Path(__file__).parent))
-    env = {"PYTHONPATH": str(PYTHON_DIR), "PATH": "/usr/bin:/bin"}
+    env = {"PYTHONPATH": str(PYTHON_DIR), "PATH": "/usr/bin:/bin", "PYTHONDONTWRITEBYTECODE": "1"}
     runs = [subprocess.Popen([sys.executable, "-c", script, str(path), str(seed)], stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True, env=env) for seed in (1, 2)]
     outputs = [run.communicate(timeout=120) for run in runs]

@@ -44,10 +44,13 @@ def test_a_new_nested_folder_passes_and_nothing_is_created(tmp_path):
 @pytest.mark.parametrize("where, words", [("file", "is a file"), ("/dev/null", "not a folder"),
                                           ("/proc/rscalib-out", "proc file system"),
                                           ("/sys/rscalib-out", "sysfs file system"),
-                                          ("under a file", "is a file"), ("", "empty")])
+                                          ("under a file", "is a file"), ("dangling link", "a link to nothing"),
+                                          ("", "empty")])
 def test_places_that_cannot_hold_results_are_refused_in_one_line(tmp_path, where, words):
     (tmp_path / "f.txt").write_text("x")
-    out = {"file": tmp_path / "f.txt", "under a file": tmp_path / "f.txt" / "out"}.get(where, where)
+    (tmp_path / "link").symlink_to(tmp_path / "nowhere")
+    out = {"file": tmp_path / "f.txt", "under a file": tmp_path / "f.txt" / "out",
+           "dangling link": tmp_path / "link"}.get(where, where)
     with pytest.raises(InputError) as error:
         check_output_folder(out)
     message = str(error.value)
@@ -198,7 +201,7 @@ def test_staging_of_a_killed_run_is_cleared(tmp_path):
 # -- every command with --out checks it before any work --------------------------------------------------
 
 COMMANDS = ["linedelay", "linear", "localize", "flicker", "selfcalib", "intrinsics", "simulate", "simulate --led",
-            "simulate --scene", "demo"]
+            "simulate --scene", "demo", "batch"]
 
 
 def commands(tmp: Path, out: str) -> dict:
@@ -214,7 +217,8 @@ def commands(tmp: Path, out: str) -> dict:
             "intrinsics": ["intrinsics", str(video), "--target", str(target), "--out", out],
             "simulate": ["simulate", "--out", out, "--quiet"], "simulate --led": ["simulate", "--led", "--flicker-hz",
                                                                                   "100", "--out", out, "--quiet"],
-            "simulate --scene": ["simulate", "--scene", "--out", out, "--quiet"], "demo": ["demo", "--out", out]}
+            "simulate --scene": ["simulate", "--scene", "--out", out, "--quiet"], "demo": ["demo", "--out", out],
+            "batch": ["batch", str(video), "--out", out]}
 
 
 @pytest.mark.parametrize("name", COMMANDS)
