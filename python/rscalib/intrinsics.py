@@ -23,6 +23,7 @@ from .detection.result import DetectionResult
 from .errors import InputError
 from .io.camera_formats.mrcal import write_corners_vnl
 from .io.cameras import camera_from_opencv, opencv_matrices, write_camera_set, write_opencv_yaml
+from .io.output_folder import output_set
 from .io.results import write_result_json
 
 MODELS = ("pinhole-radtan", "pinhole-equidistant")
@@ -376,42 +377,43 @@ def write_intrinsics(result: IntrinsicsResult, out_dir, detections: Optional[Det
     except OSError as error:
         raise InputError(f"cannot create {out}: {error.strerror}") from None
     camera_path, json_path = out / "camera.yaml", out / "result.json"
-    write_opencv_yaml(result.camera, camera_path, extra={"avg_reprojection_error": float(result.rms_px)})
-    summary = {"rscalib_version": __version__, "detector_version": DETECTOR_VERSION, **result.to_dict()}
-    fps = 0.0
-    if detections is not None and detections.timestamps != "frame index" and \
-            detections.observations.num_frames > 1:
-        fps = float(1.0 / np.median(np.diff(detections.observations.frame_times_s)))
-    exports = write_camera_set(result.camera, out, None, fps=fps, rms_px=result.rms_px, opencv_name=None,
-                               num_images=len(result.view_index), gyroflow=gyroflow)
-    files = {"opencv_yaml": camera_path.name} | exports.files
-    notes = list(exports.notes)
-    if detections is not None:
-        obs = detections.observations
-        try:
-            write_corners_vnl(out / "corners.vnl", [str(label) for label in detections.frame_labels],
-                              obs.frame_index, obs.point_id, obs.uv, obs.target_points)
-            files["mrcal_corners"] = "corners.vnl"
-        except InputError as error:
-            notes.append(f"no corners.vnl: {error}")
-    if exports.details:
-        summary["exports"] = exports.details
-    summary["export_notes"] = notes
-    summary["files"] = files
-    if detections is not None:
-        times = detections.observations.frame_times_s
-        for view, index in zip(summary["views"], result.view_index):
-            view["time_s"] = float(times[index])
-        summary.update({
-            "frames_total": int(detections.frames_total),
-            "frames_detected": int(detections.frames_detected),
-            "dropped": {k: int(v) for k, v in detections.dropped.items()},
-            "timestamps": detections.timestamps,
-            "detections_from_cache": bool(detections.from_cache),
-        })
-        summary["warnings"] = list(detections.warnings) + summary["warnings"]
-    summary.update(extra or {})
-    if inputs is None:
-        inputs = (extra or {}).get("inputs")
-    write_result_json(out, summary, command="intrinsics", inputs=inputs)
+    with output_set(out) as staged:   # the files replace the previous run's as a set, result.json last
+        write_opencv_yaml(result.camera, staged / "camera.yaml", extra={"avg_reprojection_error": float(result.rms_px)})
+        summary = {"rscalib_version": __version__, "detector_version": DETECTOR_VERSION, **result.to_dict()}
+        fps = 0.0
+        if detections is not None and detections.timestamps != "frame index" and \
+                detections.observations.num_frames > 1:
+            fps = float(1.0 / np.median(np.diff(detections.observations.frame_times_s)))
+        exports = write_camera_set(result.camera, staged, None, fps=fps, rms_px=result.rms_px, opencv_name=None,
+                                   num_images=len(result.view_index), gyroflow=gyroflow)
+        files = {"opencv_yaml": "camera.yaml"} | exports.files
+        notes = list(exports.notes)
+        if detections is not None:
+            obs = detections.observations
+            try:
+                write_corners_vnl(staged / "corners.vnl", [str(label) for label in detections.frame_labels],
+                                  obs.frame_index, obs.point_id, obs.uv, obs.target_points)
+                files["mrcal_corners"] = "corners.vnl"
+            except InputError as error:
+                notes.append(f"no corners.vnl: {error}")
+        if exports.details:
+            summary["exports"] = exports.details
+        summary["export_notes"] = notes
+        summary["files"] = files
+        if detections is not None:
+            times = detections.observations.frame_times_s
+            for view, index in zip(summary["views"], result.view_index):
+                view["time_s"] = float(times[index])
+            summary.update({
+                "frames_total": int(detections.frames_total),
+                "frames_detected": int(detections.frames_detected),
+                "dropped": {k: int(v) for k, v in detections.dropped.items()},
+                "timestamps": detections.timestamps,
+                "detections_from_cache": bool(detections.from_cache),
+            })
+            summary["warnings"] = list(detections.warnings) + summary["warnings"]
+        summary.update(extra or {})
+        if inputs is None:
+            inputs = (extra or {}).get("inputs")
+        write_result_json(staged, summary, command="intrinsics", inputs=inputs)
     return camera_path, json_path

@@ -1,18 +1,26 @@
 """The `rscalib` command line: one entry point, a subcommand per job (README: the commands).
 
-Exit codes: 0 success; 2 bad input (one line on stderr, no traceback); 3 the data does
-not determine the answer (results are still written, with the warning).
+Exit codes: 0 success; 2 bad input (one line on stderr, no traceback; also an output folder that
+cannot be written, and running out of memory); 3 the data does not determine the answer (results
+are still written, with the warning); 1 an internal error (one line; RSCALIB_DEBUG=1 shows the
+traceback); 130 Ctrl-C, 143 SIGTERM (detection workers stopped, no partial result.json).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
+import signal
 import sys
 import warnings
 
 from .._version import __version__
 from ..errors import InputError
 from . import batch, demo, flicker, intrinsics, linedelay, selfcalib, simulate
-from .common import EXIT_BAD_INPUT, EXIT_OK, EXIT_UNDETERMINED  # noqa: F401  (re-exported)
+from .common import EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_OK, EXIT_UNDETERMINED  # noqa: F401  (re-exported)
+
+EXIT_INTERRUPTED = 130   # Ctrl-C (128 + SIGINT)
+EXIT_TERMINATED = 143    # SIGTERM (128 + SIGTERM)
 
 # One module per subcommand: add_parser(sub) and run(args); each imports its engine only when run.
 COMMAND_MODULES = [batch, demo, flicker, intrinsics, linedelay, selfcalib, simulate]
@@ -57,6 +65,43 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that detection workers and partial outputs are cleaned up."""
+
+
+@contextlib.contextmanager
+def _sigterm_raises():
+    """SIGTERM -> Terminated (exit 143) while a command runs; a second SIGTERM kills at once."""
+    def handler(signum, frame):
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        raise Terminated()
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread: leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _one_line(error: Exception) -> tuple[int, str]:
+    """(exit code, one line) for an error that is not InputError."""
+    text = " ".join(str(error).split())
+    if isinstance(error, MemoryError):
+        return EXIT_BAD_INPUT, ("error: out of memory" + (f" ({text})" if text else "") + ": the input or options "
+                                "need more memory than this machine has (fewer --workers, a shorter input or a "
+                                "smaller size)")
+    if isinstance(error, OSError):
+        where = " -> ".join(str(f) for f in (error.filename, error.filename2) if f is not None)
+        reason = error.strerror or text or type(error).__name__
+        return EXIT_BAD_INPUT, f"error: {where}: {reason}" if where else f"error: {reason}"
+    return EXIT_INTERNAL, (f"internal error: {type(error).__name__}: {text} "
+                           "(set RSCALIB_DEBUG=1 for the traceback; please report it)")
+
+
 def main(argv: list[str] | None = None) -> int:
     from ..io.results import set_command_line
 
@@ -68,14 +113,24 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         print("rscalib: error: a COMMAND is required", file=sys.stderr)
         return EXIT_BAD_INPUT
-    try:
-        return int(args.func(args))
-    except InputError as error:
-        print(f"rscalib {args.command}: error: {error}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("rscalib: interrupted", file=sys.stderr)
-        return 130
+    with _sigterm_raises():
+        try:
+            return int(args.func(args))
+        except InputError as error:
+            print(f"rscalib {args.command}: error: {error}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        except KeyboardInterrupt:
+            print("rscalib: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except Terminated:
+            print("rscalib: terminated", file=sys.stderr)
+            return EXIT_TERMINATED
+        except Exception as error:  # noqa: BLE001 - the last line of defence: never a traceback for a user
+            if os.environ.get("RSCALIB_DEBUG"):
+                raise
+            code, line = _one_line(error)
+            print(f"rscalib {args.command}: {line}", file=sys.stderr)
+            return code
 
 
 if __name__ == "__main__":

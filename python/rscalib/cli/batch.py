@@ -76,6 +76,9 @@ def run(args: argparse.Namespace) -> int:
     if args.job_timeout is not None and not args.job_timeout > 0:
         raise InputError("--job-timeout must be positive")
     from ..batch.runner import run_batch
+    from ..io.output_folder import check_output_folder, expected_output_bytes
+
+    check_output_folder(args.out, expected_output_bytes(64))   # the store, index.html, the first jobs' outputs
     from ..batch.store import ANSWERED, STORE_FILE, ResultStore
     from ..batch.summary import summary_line, write_index
 

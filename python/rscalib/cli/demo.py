@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from .._version import __version__
+from ..io.output_folder import check_output_folder, expected_output_bytes
 from .common import EXIT_OK
 
 
@@ -39,6 +40,9 @@ def _detection_printer(detection) -> None:
 def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     line_delay_s = args.line_delay_us * 1e-6
+    if args.out:   # the rendered video (raw size, generously), its detection cache and the report
+        frames = 0 if args.observations_only else args.duration * 30.0
+        check_output_folder(args.out, expected_output_bytes(64, extra_bytes=frames * 640 * 480 * 1.5))
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="rscalib-demo-"))
     out.mkdir(parents=True, exist_ok=True)
     print(f"rscalib {__version__} demo: {args.duration:g} s of hand-held 30 fps video of a 9x6 checkerboard, "

@@ -62,8 +62,10 @@ def _check(args) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..flicker.estimate import estimate_line_delay_flicker
     from ..flicker.report import write_flicker_outputs
+    from ..io.output_folder import check_output_folder, expected_output_bytes
 
     _check(args)
+    check_output_folder(args.out, expected_output_bytes(8))
     result = estimate_line_delay_flicker(args.source, args.frequency, rows=args.rows, roi=args.roi,
                                          max_frames=args.max_frames, method=args.method, readout=args.readout,
                                          region=args.region, progress=not args.quiet)

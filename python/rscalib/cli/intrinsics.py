@@ -54,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
     from ..detection.pipeline import detect_video
     from ..errors import InputError
     from ..intrinsics import calibrate_intrinsics, write_intrinsics
+    from ..io.output_folder import check_output_folder, expected_output_bytes
     from ..io.targets import load_target
 
     if args.max_views < 3:
@@ -70,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
         if args.subpix_window < 1:
             raise InputError("--subpix-window must be at least 1")
         options = replace(options, subpix_window_px=args.subpix_window)
+    check_output_folder(args.out, expected_output_bytes(32, list(args.inputs), per_input_byte=0.1))
     source = args.inputs[0] if len(args.inputs) == 1 else args.inputs
     detections = detect_video(source, target, workers=args.workers, cache=not args.no_cache,
                               cache_dir=args.cache_dir, progress=not args.quiet, options=options)

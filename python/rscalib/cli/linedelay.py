@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import CAPTURE_GUIDE, EXIT_INTERNAL, EXIT_NOT_TRUSTED, EXIT_OK, EXIT_UNDETERMINED
+from .common import CAPTURE_GUIDE, EXIT_NOT_TRUSTED, EXIT_OK, EXIT_UNDETERMINED
 from .intrinsics import add_lens_profile_options, lens_profile_names
 
 # `rscalib linedelay` exit codes (README: exit codes): 0 trusted, 2 bad input, 3 undetermined, and
@@ -178,24 +177,20 @@ def _print_warnings(summary: dict) -> None:
         print(f"warning: {in_flags(w)}", file=sys.stderr)
 
 
+def _check_out(args) -> None:
+    """--out before the slow part: a writable folder with room for the report, plots, camera files
+    and what grows with the video (trajectories, corners.vnl)."""
+    from ..io.output_folder import check_output_folder, expected_output_bytes
+
+    check_output_folder(args.out, expected_output_bytes(32, [args.video], per_input_byte=0.1))
+
+
 def run_linedelay(args) -> int:
-    try:
-        return _run_linedelay(args)
-    except (InputError, KeyboardInterrupt):
-        raise
-    except Exception as error:  # noqa: BLE001 - never a traceback for a user
-        if os.environ.get("RSCALIB_DEBUG"):
-            raise
-        print(f"rscalib linedelay: internal error: {type(error).__name__}: {error} "
-              "(RSCALIB_DEBUG=1 shows where; please report it)", file=sys.stderr)
-        return EXIT_INTERNAL
-
-
-def _run_linedelay(args) -> int:
     from ..linedelay.pipeline import calibrate_video
     from ..linedelay.report import NOT_TRUSTED, TRUSTED, UNDETERMINED, write_video_outputs
 
     _check_flags(args)
+    _check_out(args)
     solving = ("estimating per-frame poses and line delay (linear interpolation):" if args.trajectory == "linear"
                else "estimating trajectory and line delay:")
     run = calibrate_video(args.video, args.target, args.camera, model=args.trajectory, max_rounds=args.max_rounds,
@@ -243,6 +238,7 @@ def run_localize(args) -> int:
     from ..linedelay.report import write_video_outputs
 
     _check_flags(args)
+    _check_out(args)
     run = localize_video(args.video, args.target, args.camera, model=args.model, line_delay_s=args.line_delay,
                          **_common_options(args, ""))
     summary = write_video_outputs(run, args.out)

@@ -60,12 +60,14 @@ def _check(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..io.output_folder import check_output_folder, expected_output_bytes
     from ..selfcalib.calibrate import default_options, read_gray_frames, self_calibrate
     from ..selfcalib.front_end import FrontEndOptions
     from ..selfcalib.prior import single_gaussian_grid
     from ..selfcalib.report import write_selfcalib_outputs
 
     _check(args)
+    check_output_folder(args.out, expected_output_bytes(16))
     video = read_gray_frames(args.source)
     width, height = video.image_size
     if args.bank == "single":

@@ -95,6 +95,13 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _check_out(args: argparse.Namespace, size, frames: float, copies: int = 1) -> None:
+    """--out before rendering: writable, with room for the frames (raw size: generous for FFV1/PNG)."""
+    from ..io.output_folder import check_output_folder, expected_output_bytes
+
+    check_output_folder(args.out, expected_output_bytes(16, extra_bytes=float(frames) * size[0] * size[1] * copies))
+
+
 def run_led(args: argparse.Namespace) -> int:
     """`--led`: LED / flicker footage (rscalib.sim.flicker_light) with its truth."""
     import numpy as np
@@ -129,6 +136,7 @@ def run_led(args: argparse.Namespace) -> int:
                          phase=args.flicker_phase / (2 * np.pi))
     scene = FlickerScene(lamp=args.lamp, brightness=args.brightness, vignetting=args.vignetting,
                          overlay_text=args.overlay, blob=args.blob)
+    _check_out(args, size, count)
     times = np.arange(count) / args.fps
     truth = write_flicker_sequence(args.out, light, scene, size, d, times, exposure_s=args.exposure,
                                    noise=args.noise, jpeg_quality=args.jpeg_quality, seed=args.seed,
@@ -153,6 +161,7 @@ def run_scene(args: argparse.Namespace) -> int:
     if not (args.duration > 0 and args.fps > 0):
         raise InputError("--duration and --fps must be positive")
     num_frames = max(2, int(round(args.duration * args.fps)))
+    _check_out(args, (320, 240), num_frames)
     render_scene_sequence(args.out, num_frames=num_frames, seed=args.seed, fps=args.fps, noise_sigma=args.noise)
     if not args.quiet:
         f, cx, cy, k1, k2 = PAPER_CAMERA_PARAMS
@@ -179,6 +188,10 @@ def run(args: argparse.Namespace) -> int:
     if args.camera:
         from ..io.cameras import load_camera
         camera = load_camera(args.camera).camera
+    match = re.fullmatch(r"(\d+)x(\d+)", args.size)
+    size = (camera.width, camera.height) if camera is not None else \
+        (int(match.group(1)), int(match.group(2))) if match else (640, 480)
+    _check_out(args, size, args.duration * args.fps, copies=2 if args.frames_dir else 1)
     result = render_video(args.out, line_delay_s=args.line_delay, fps=args.fps, size=args.size,
                           target=args.target, duration_s=args.duration, exposure_s=args.exposure,
                           noise=args.noise, seed=args.seed, camera=camera, motion=args.motion,

@@ -2,8 +2,11 @@
 worker processes, accepted detections as Observations, drops counted by reason, a cache."""
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import hashlib
 import os
+import signal
 import sys
 import time
 from collections import deque
@@ -48,12 +51,13 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
     frames = open_source(source)
     started = time.perf_counter()
     cache_file = None
+    cache_problems: list = []   # a bad cache file: one line each, reported with the result
     if cache:
         key = hashlib.sha256("\n".join([frames.content_hash(), target.fingerprint(), options.fingerprint(),
                                         DETECTOR_VERSION]).encode()).hexdigest()[:32]
         cache_file = Path(cache_dir) if cache_dir is not None else default_cache_dir()
         cache_file = cache_file / f"{key}.npz"
-        cached = load_cache(cache_file, target)
+        cached = load_cache(cache_file, target, cache_problems)
         if cached is not None:
             cached.detect_time_s = time.perf_counter() - started
             return cached
@@ -66,16 +70,51 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
     result.detect_time_s = time.perf_counter() - started
     if cache_file is not None:
         save_cache(cache_file, result)
+    result.warnings[:0] = cache_problems
     return result
 
 
 _WORKER_DETECTOR: Optional[Detector] = None
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
-def _worker_init(target: Target, options: DetectOptions) -> None:
+def die_with_parent(parent_pid: int) -> None:
+    """In a worker: Linux kills it when the process that started it dies (also by SIGKILL), so no
+    worker outlives an interrupted or killed run; elsewhere a no-op."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect
+        os._exit(1)
+
+
+def _worker_init(target: Target, options: DetectOptions, parent_pid: int) -> None:
     global _WORKER_DETECTOR
+    die_with_parent(parent_pid)
+    # Ctrl-C reaches the whole process group: the parent stops the workers, which must not print a
+    # KeyboardInterrupt traceback (blocked since spawn, so also during the imports before this)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     cv2.setNumThreads(1)  # one process per core already
     _WORKER_DETECTOR = Detector(target, options)
+
+
+@contextlib.contextmanager
+def _sigint_blocked():
+    """SIGINT blocked in this thread meanwhile (a child spawned meanwhile inherits the mask); a
+    Ctrl-C that arrives meanwhile is delivered when it ends."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _worker_detect(image: np.ndarray) -> FrameDetection:
@@ -115,7 +154,7 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
         from concurrent.futures import ProcessPoolExecutor
         # spawn: forking a process that already runs OpenCV's thread pool is not safe
         pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_worker_init, initargs=(target, options))
+                                   initializer=_worker_init, initargs=(target, options, os.getpid()))
     else:
         detector = Detector(target, options)
     pending: deque = deque()
@@ -136,13 +175,19 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
                 if pool is None:
                     record(info, detector.detect(frame.image))
                 else:
-                    pending.append((info, pool.submit(_worker_detect, frame.image)))
+                    with _sigint_blocked():   # a worker spawned here starts with Ctrl-C blocked (see _worker_init)
+                        pending.append((info, pool.submit(_worker_detect, frame.image)))
                     while len(pending) > 2 * workers:  # bounded: memory independent of length
                         record(*_result(pending.popleft()))
                 bar.update(state["total"] - len(pending))
             while pending:
                 record(*_result(pending.popleft()))
             bar.update(state["total"])
+    except BaseException:
+        if pool is not None:  # interrupted (Ctrl-C, SIGTERM) or failed: stop the workers now, not after their frames
+            stop_workers(pool)
+            pool = None
+        raise
     finally:
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
@@ -159,6 +204,20 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
     return DetectionResult(observations, state["total"], len(ids), {k: v for k, v in dropped.items() if v},
                            False, image_size, np.asarray(numbers, dtype=np.int64), labels,
                            np.asarray(blur, dtype=np.float64), frames.timestamps_source, list(frames.warnings))
+
+
+def stop_workers(pool, timeout_s: float = 2.0) -> None:
+    """Terminate a ProcessPoolExecutor's workers at once (shutdown() would let running tasks finish)."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+    deadline = time.monotonic() + timeout_s
+    for process in processes:
+        process.join(max(0.0, deadline - time.monotonic()))
+        if process.is_alive():
+            process.kill()
+            process.join(1.0)
 
 
 def _result(item):

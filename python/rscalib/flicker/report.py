@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.output_folder import output_set
 from ..io.results import write_result_json
 from .estimate import FlickerResult
 
@@ -16,9 +17,15 @@ def write_flicker_outputs(result: FlickerResult, out_dir, source=None) -> dict:
     out = Path(out_dir)
     summary = result.summary_dict() | {"source": str(source) if source is not None else None,
                                        "files": {"plot": "flicker.png"}}
-    write_result_json(out, summary, command="flicker",
-                      inputs={"source": source, "frequency_hz": result.frequency_hz})
-    plot_flicker(result, out / "flicker.png")
+    with output_set(out) as staged:   # the files replace the previous run's as a set, result.json last
+        try:
+            plot_flicker(result, staged / "flicker.png")
+        except Exception as error:  # noqa: BLE001 - a plot of degenerate data must not cost the result
+            summary["files"] = {}
+            summary["warnings"] = [*summary.get("warnings", []),
+                                   f"plot flicker.png skipped: {type(error).__name__}: {error}"]
+        write_result_json(staged, summary, command="flicker",
+                          inputs={"source": source, "frequency_hz": result.frequency_hz})
     return summary
 
 

@@ -35,6 +35,7 @@ from .._core import CameraModel  # noqa: E402
 from ..errors import InputError  # noqa: E402
 from ..io.camera_formats.mrcal import write_corners_vnl  # noqa: E402
 from ..io.cameras import FILE_PURPOSES, write_camera_set  # noqa: E402
+from ..io.output_folder import output_set  # noqa: E402
 from ..io.results import write_result_json  # noqa: E402
 from ..io.trajectory_files import CSV_COLUMNS, write_tum_trajectory  # noqa: E402
 from ..io.trajectory_files import write_trajectory_csv as _write_csv  # noqa: E402
@@ -374,35 +375,36 @@ def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_tota
     provenance). frames_total: frames read (default: the result's); extra: more result.json fields;
     fps: for the Gyroflow profile; readout: the readout direction (linedelay.readout); gyroflow:
     camera_brand, camera_model, lens_model for its profile; command, inputs: the provenance."""
-    out, summary = _start(result, out_dir, frames_total, extra)
-    summary["image_readout_time_s"] = image_readout_time_s(result)
-    v = verdict(result)
-    summary["verdict"] = {"trust": v.trust, "status": v.status, "headline": v.headline, "reasons": v.reasons}
-    warnings = list(summary["warnings"])
+    with output_set(out_dir) as staged:
+        out, summary = _start(result, staged, frames_total, extra)
+        summary["image_readout_time_s"] = image_readout_time_s(result)
+        v = verdict(result)
+        summary["verdict"] = {"trust": v.trust, "status": v.status, "headline": v.headline, "reasons": v.reasons}
+        warnings = list(summary["warnings"])
 
-    files = write_trajectories(result, out)
-    exports = write_camera_set(camera, out, result.line_delay_s, fps=fps, rms_px=result.rms_px,
-                               readout_direction=GYROFLOW_READOUT.get(readout), gyroflow=gyroflow)
-    files |= exports.files
-    notes = list(exports.notes)
-    if exports.details:
-        summary["exports"] = exports.details
-    if detections is not None:
-        skipped = write_detections_vnl(detections, out / "corners.vnl")
-        if skipped is None:
-            files["mrcal_corners"] = "corners.vnl"
-        else:
-            notes.append(skipped)
-    plots = _plots(result, out, warnings)
-    files["plots"] = [p.name for p in plots.values()]
-    files["report"] = "report.html"
-    summary["warnings"] = warnings
-    summary["export_notes"] = notes
-    summary["files"] = files
-    result_path = write_result_json(out, summary, command=command, inputs=inputs)
-    if title is None:
-        title = "rscalib linedelay" + (" --trajectory linear" if isinstance(result, LinearInterpResult) else "")
-    _write_html(out / "report.html", title, summary, v, plots, _provenance_of(result_path))
+        files = write_trajectories(result, out)
+        exports = write_camera_set(camera, out, result.line_delay_s, fps=fps, rms_px=result.rms_px,
+                                   readout_direction=GYROFLOW_READOUT.get(readout), gyroflow=gyroflow)
+        files |= exports.files
+        notes = list(exports.notes)
+        if exports.details:
+            summary["exports"] = exports.details
+        if detections is not None:
+            skipped = write_detections_vnl(detections, out / "corners.vnl")
+            if skipped is None:
+                files["mrcal_corners"] = "corners.vnl"
+            else:
+                notes.append(skipped)
+        plots = _plots(result, out, warnings)
+        files["plots"] = [p.name for p in plots.values()]
+        files["report"] = "report.html"
+        summary["warnings"] = warnings
+        summary["export_notes"] = notes
+        summary["files"] = files
+        result_path = write_result_json(out, summary, command=command, inputs=inputs)
+        if title is None:
+            title = "rscalib linedelay" + (" --trajectory linear" if isinstance(result, LinearInterpResult) else "")
+        _write_html(out / "report.html", title, summary, v, plots, _provenance_of(result_path))
     return summary
 
 
@@ -412,12 +414,13 @@ def write_localize_outputs(result: LineDelayResult, out_dir, *, comparison: Opti
     """A trajectory with a known line delay (rscalib.localize) into out_dir: result.json (with the
     comparison against per-frame GS PnP, linedelay.pnp.compare_with_pnp), trajectory.csv,
     trajectory_tum.txt and trajectory.png. Returns the result.json dict."""
-    out, summary = _start(result, out_dir, frames_total, extra, trajectory_model="rs-spline",
-                          gs_pnp_comparison=comparison)
-    summary.pop("line_delay_std_s", None)  # d was given, not estimated
-    summary["image_readout_time_s"] = image_readout_time_s(result)
-    summary["files"] = write_trajectories(result, out) | {"plots": [plot_trajectory(result, out / "trajectory.png").name]}
-    write_result_json(out, summary, command=command, inputs=inputs)
+    with output_set(out_dir) as staged:
+        out, summary = _start(result, staged, frames_total, extra, trajectory_model="rs-spline",
+                              gs_pnp_comparison=comparison)
+        summary.pop("line_delay_std_s", None)  # d was given, not estimated
+        summary["image_readout_time_s"] = image_readout_time_s(result)
+        summary["files"] = write_trajectories(result, out) | {"plots": [plot_trajectory(result, out / "trajectory.png").name]}
+        write_result_json(out, summary, command=command, inputs=inputs)
     return summary
 
 
@@ -426,9 +429,10 @@ def write_pnp_outputs(trajectory: PnpTrajectory, out_dir, *, frames_total: Optio
                       inputs: Optional[dict] = None) -> dict:
     """Per-frame GS PnP poses (linedelay.pnp.pnp_trajectory) into out_dir: result.json, and
     trajectory.csv and trajectory_tum.txt in the format of the other models. Returns the result.json dict."""
-    out, summary = _start(trajectory, out_dir, frames_total, extra)
-    summary["files"] = write_trajectories(trajectory, out)
-    write_result_json(out, summary, command=command, inputs=inputs)
+    with output_set(out_dir) as staged:
+        out, summary = _start(trajectory, staged, frames_total, extra)
+        summary["files"] = write_trajectories(trajectory, out)
+        write_result_json(out, summary, command=command, inputs=inputs)
     return summary
 
 

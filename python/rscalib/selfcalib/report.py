@@ -11,7 +11,8 @@ from typing import Optional
 import numpy as np
 
 from ..io.cameras import write_opencv_yaml
-from ..io.results import write_result_json
+from ..io.output_folder import output_set
+from ..io.results import RESULT_FILE, write_result_json
 from .calibrate import PARAM_NAMES, SelfCalibResult, civera_to_opencv
 
 CAMERA_FILE = "camera.yaml"
@@ -34,15 +35,15 @@ def write_selfcalib_outputs(result: SelfCalibResult, out_dir, *, extra: Optional
     camera's description; ``inputs`` go to its provenance), out_dir/camera.yaml and
     out_dir/history.png."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     summary = {**result.summary_dict(), **(extra or {})}
     opencv, max_error = civera_to_opencv(result.camera())
-    write_opencv_yaml(opencv, out / CAMERA_FILE)
-    summary["opencv_camera"] = {"file": CAMERA_FILE, "model": "pinhole-radtan (k1, k2, k3 fitted; p1 = p2 = 0)",
-                                "max_difference_px": max_error}
-    plot_history(result, out / HISTORY_PLOT)
-    path = write_result_json(out, summary, command="selfcalib", inputs=inputs)
-    return SelfCalibOutputs(result_json=path, camera_yaml=out / CAMERA_FILE, history_png=out / HISTORY_PLOT,
+    with output_set(out) as staged:   # the files replace the previous run's as a set, result.json last
+        write_opencv_yaml(opencv, staged / CAMERA_FILE)
+        summary["opencv_camera"] = {"file": CAMERA_FILE, "model": "pinhole-radtan (k1, k2, k3 fitted; p1 = p2 = 0)",
+                                    "max_difference_px": max_error}
+        plot_history(result, staged / HISTORY_PLOT)
+        write_result_json(staged, summary, command="selfcalib", inputs=inputs)
+    return SelfCalibOutputs(result_json=out / RESULT_FILE, camera_yaml=out / CAMERA_FILE, history_png=out / HISTORY_PLOT,
                             opencv_max_difference_px=max_error)
 
 
