@@ -16,8 +16,13 @@ import pytest
 
 from rscalib import InputError
 from rscalib.io import limits
-from rscalib.selfcalib.calibrate import (FILTER_MEMORY_FACTOR, default_options, map_size_bound,
-                                         predicted_memory_bytes, self_calibrate)
+from rscalib.selfcalib.calibrate import (
+    FILTER_MEMORY_FACTOR,
+    default_options,
+    map_size_bound,
+    predicted_memory_bytes,
+    self_calibrate,
+)
 from rscalib.selfcalib.driver import run_bank
 from rscalib.selfcalib.prior import initial_bank, make_bank, single_gaussian_grid
 from rscalib.sim.scene_features import TrueCorrespondences, simulate_sequence
