@@ -119,6 +119,8 @@ def desk_loop(folder: Path, frames: int, step: int = 2) -> Path:
             break
         images.append(image)
     capture.release()
+    if not images:
+        raise SystemExit(f"{DESK}: no frames decoded")
     images = images[::step]
     loop = images + images[-2:0:-1]
     for k in range(frames):
