@@ -20,11 +20,13 @@ they are not speed results.
 
 Usage: PYTHONPATH=python .venv/bin/python benchmarks/bench_memory.py [--cases linedelay,selfcalib,detection]
            [--cache /tmp/rscalib_bench_memory] [--out benchmarks/results/bench_memory.json]
+The rows of cases not run this time are kept from an earlier --out.
 Real data: $RSCALIB_SHARED_DATA, else ../shared/data beside the repository.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -192,7 +194,11 @@ def main() -> None:
     args = parser.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
     out_dir = args.cache / "outputs"
-    rows = run_cases(set(args.cases.split(",")), args.cache, out_dir)
+    cases = set(args.cases.split(","))
+    rows = run_cases(cases, args.cache, out_dir)
+    if args.out.exists():   # the other cases' rows of an earlier run stay (run the cases one at a time)
+        earlier = json.loads(args.out.read_text()).get("results", [])
+        rows = [row for row in earlier if row["case"] not in cases] + rows
     text = table(rows)
     print(text)
     write_results(args.out, "bench_memory", machine_info(), {"cases": args.cases, "cache": str(args.cache)}, rows,
