@@ -42,6 +42,8 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("RSCALIB_SHARED_DATA", ROOT.parent / "shared" / "data"))
 DESK = SHARED / "real_selfcalib_s3phone" / "escritorio_traslacion.mp4"
 CLI = [sys.executable, "-m", "rscalib.cli"]
+# The commands run this checkout's package, wherever the benchmark is started from.
+CHILD_ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "python"), os.environ.get("PYTHONPATH", "")])}
 VIDEO_SECONDS = (5, 15, 60)
 SCENE_SECONDS = 40
 SCENE_FRAMES = (100, 300, 600, 1200)
@@ -55,7 +57,7 @@ def measure(argv: list, cwd: Path, log: Path) -> dict:
     started = time.perf_counter()
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "w") as output:
-        proc = subprocess.Popen(argv, cwd=cwd, stdout=output, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(argv, cwd=cwd, stdout=output, stderr=subprocess.STDOUT, env=CHILD_ENV)
     tree_peak = 0
     root = psutil.Process(proc.pid)
     status = usage = None
