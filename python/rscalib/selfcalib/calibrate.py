@@ -49,9 +49,9 @@ _Z99 = 2.5758293035489004
 RANSAC_HYPOTHESES = 100
 # Memory of the bank: every Gaussian holds a dense covariance of the state, 18 + 6 per (inverse-depth)
 # feature, in doubles. Measured peak over G x dim^2 x 8 B: 1.04-1.08 at 108 Gaussians, 50-200
-# features (docs/benchmarks.md, "Peak memory against input size"); 1.25 leaves room for the update's
-# temporaries.
-FILTER_MEMORY_FACTOR = 1.25
+# features, once 1.38 at 50 (the two update threads' allocations; docs/benchmarks.md, "Peak memory
+# against input size"); 1.5 covers both.
+FILTER_MEMORY_FACTOR = 1.5
 _STATE_WITHOUT_FEATURES = 18
 _INVERSE_DEPTH_SIZE = 6
 
