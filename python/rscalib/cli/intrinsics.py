@@ -54,8 +54,10 @@ def run(args: argparse.Namespace) -> int:
     from ..detection.pipeline import detect_video
     from ..errors import InputError
     from ..intrinsics import calibrate_intrinsics, write_intrinsics
+    from ..io.limits import bounded_workers
     from ..io.output_folder import check_output_folder, expected_output_bytes
     from ..io.targets import load_target
+    from ..io.video import open_source
 
     if args.max_views < 3:
         raise InputError("--max-views must be at least 3")
@@ -73,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
         options = replace(options, subpix_window_px=args.subpix_window)
     check_output_folder(args.out, expected_output_bytes(32, list(args.inputs), per_input_byte=0.1))
     source = args.inputs[0] if len(args.inputs) == 1 else args.inputs
-    detections = detect_video(source, target, workers=args.workers, cache=not args.no_cache,
+    workers = bounded_workers(open_source(source), args.workers)   # frame sizes from headers, before decoding
+    detections = detect_video(source, target, workers=workers, cache=not args.no_cache,
                               cache_dir=args.cache_dir, progress=not args.quiet, options=options)
     result = calibrate_intrinsics(detections, model=args.model, max_views=args.max_views)
     camera_path, json_path = write_intrinsics(result, args.out, detections,

@@ -13,6 +13,7 @@ import numpy as np
 from .. import _core
 from .._progress import Progress, ProgressArg
 from ..errors import InputError
+from ..io.limits import check_memory, check_source_memory, frame_memory_bytes
 from ..io.video import open_source
 from .driver import SelfCalibHistory, run_bank
 from .front_end import FrontEndOptions, ImageFrontEnd
@@ -20,7 +21,8 @@ from .prior import PAPER_PIXEL_SIZE_MM, initial_bank, make_bank, single_gaussian
 
 __all__ = ["PARAM_NAMES", "GrayFrames", "Restart", "SelfCalibResult", "civera_to_opencv", "judge_determined",
            "read_gray_frames", "self_calibrate", "default_options", "RANSAC_HYPOTHESES", "RESTART_OFFSET", "DETERMINED_MAX_CONTRACTION",
-           "DETERMINED_PP_TOLERANCE", "UNDETERMINED_PP_HALF_WIDTH"]
+           "DETERMINED_PP_TOLERANCE", "UNDETERMINED_PP_HALF_WIDTH", "FILTER_MEMORY_FACTOR", "map_size_bound",
+           "predicted_memory_bytes"]
 
 PARAM_NAMES = ("f", "cx", "cy", "k1", "k2")
 
@@ -45,6 +47,13 @@ _Z99 = 2.5758293035489004
 # principal point from (303.2, 219.1) to (312.7, 235.7) against the truth (308.6, 236.5); on the
 # clean rendered room sequences it changes nothing (docs/sog.md §14).
 RANSAC_HYPOTHESES = 100
+# Memory of the bank: every Gaussian holds a dense covariance of the state, 18 + 6 per (inverse-depth)
+# feature, in doubles. Measured peak over G x dim^2 x 8 B: 1.04-1.08 at 108 Gaussians, 50-200
+# features, once 1.38 at 50 (the two update threads' allocations; docs/benchmarks.md, "Peak memory
+# against input size"); 1.5 covers both.
+FILTER_MEMORY_FACTOR = 1.5
+_STATE_WITHOUT_FEATURES = 18
+_INVERSE_DEPTH_SIZE = 6
 
 
 def default_options() -> _core.SogOptions:
@@ -135,6 +144,7 @@ def read_gray_frames(source) -> GrayFrames:
     """Open a video file or image folder (:func:`rscalib.io.video.open_source`); its image size is
     that of the first readable frame. Unreadable frames are left out."""
     opened = open_source(source)
+    check_source_memory(opened)   # from the headers: a huge frame is refused before it is decoded
     frames = opened.frames(gray=True)
     first = next(frames, None)
     while first is not None and first.image is None:
@@ -217,6 +227,34 @@ def judge_determined(mean: np.ndarray, bounds_99: np.ndarray, gaussians_left: in
                   "difference remains)"), bounds
 
 
+def map_size_bound(options: _core.SogOptions, min_visible: int, max_new_per_frame: int,
+                   frames: Optional[int]) -> int:
+    """The most features the map can hold: the cap plus one frame's new features (the bank caps
+    after each update), or without a cap (max_features <= 0) what ``frames`` frames can add;
+    InputError when there is no cap and the number of frames is unknown."""
+    if options.max_features > 0:
+        return int(options.max_features) + int(max_new_per_frame)
+    if frames is None:
+        raise InputError("SogOptions.max_features <= 0 (no map cap) needs a known number of frames (max_frames) "
+                         "to bound the memory of the filter")
+    return int(min_visible) + int(max_new_per_frame) * max(int(frames) - 1, 0)
+
+
+def predicted_memory_bytes(gaussians: int, features: int, image_size: tuple[int, int]) -> int:
+    """Peak memory of a bank of ``gaussians`` filters with ``features`` map features, plus one frame
+    of ``image_size`` in the front end (rscalib.io.limits.frame_memory_bytes)."""
+    dim = _STATE_WITHOUT_FEATURES + _INVERSE_DEPTH_SIZE * int(features)
+    return int(FILTER_MEMORY_FACTOR * gaussians * dim * dim * 8) + frame_memory_bytes(*image_size, 1)
+
+
+def _frame_count(frames, max_frames: Optional[int], expected_frames: Optional[int]) -> Optional[int]:
+    if max_frames is not None:
+        return max_frames
+    if expected_frames is not None:
+        return expected_frames
+    return len(frames) if hasattr(frames, "__len__") else None
+
+
 def _run(frames, width: int, height: int, pixel_size_mm, options, front_end, initial, max_frames, on_frame
          ) -> tuple[_core.SogBank, SelfCalibHistory, ImageFrontEnd]:
     source = front_end if isinstance(front_end, ImageFrontEnd) else ImageFrontEnd(front_end, (width, height))
@@ -252,6 +290,13 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
     first_frames, factory = _frame_factory(frames)
     fe_options = front_end.options if isinstance(front_end, ImageFrontEnd) else front_end
     initial = initial_bank(width, height, pixel_size_mm, **(grid or {}))
+    search = fe_options or FrontEndOptions()
+    features = map_size_bound(options, search.min_visible, search.max_new_per_frame,
+                              _frame_count(frames, max_frames, expected_frames))
+    needed = predicted_memory_bytes(len(initial), features, (width, height))
+    check_memory(needed, f"self-calibration with {len(initial)} Gaussians, up to {features} map features and "
+                         f"{width}x{height} frames (Gaussians x (18 + 6 x features)^2 x 8 B x {FILTER_MEMORY_FACTOR} "
+                         "+ the frame)")
     per_pass = max_frames if max_frames is not None else expected_frames
     checking = restarts and factory is not None and not isinstance(front_end, ImageFrontEnd)
     total = None if per_pass is None else per_pass * (3 if checking else 1)

@@ -24,7 +24,11 @@ import numpy as np
 from .. import _core
 from ..errors import InputError
 
-__all__ = ["FrameSearch", "MeasurementSource", "SelfCalibHistory", "run_bank"]
+__all__ = ["FrameSearch", "MeasurementSource", "OUT_OF_VIEW_FRAMES", "SelfCalibHistory", "run_bank"]
+
+# A feature not predicted inside the image for this many frames is deleted (MonoSLAM and Civera et
+# al. keep a map of what is in view; a feature that left it only grows the state until the cap).
+OUT_OF_VIEW_FRAMES = 60
 
 
 @dataclass(frozen=True)
@@ -99,15 +103,20 @@ class SelfCalibHistory:
 
 def run_bank(bank: _core.SogBank, frames: Iterable[tuple[float, Any]], source: MeasurementSource, *,
              min_visible: int = 20, max_new_per_frame: int = 10, max_frames: Optional[int] = None,
+             out_of_view_frames: Optional[int] = OUT_OF_VIEW_FRAMES,
              on_frame: Optional[Callable[[int, _core.SogBank, _core.SogUpdateReport], None]] = None
              ) -> SelfCalibHistory:
     """Run ``bank`` over ``frames``, pairs (time in s, frame) with increasing times; a frame of None
     (unreadable) is skipped. While fewer than ``min_visible`` measurements were used in a frame's
     update, ask ``source`` for new features: as many as missing in the first frame (to start the
-    map at once), at most ``max_new_per_frame`` later. Stops after ``max_frames`` frames.
+    map at once), at most ``max_new_per_frame`` later. A feature the bank has not predicted inside
+    the image for ``out_of_view_frames`` processed frames is deleted (None: never). Stops after
+    ``max_frames`` frames.
     ``on_frame(k, bank, report)`` is called after each processed frame."""
     rows: dict[str, list] = {name: [] for name in ("frame", "mean", "bounds", "gaussians", "used", "map", "time")}
     t_prev = None
+    last_in_view: dict[int, int] = {}   # feature id -> the last processed frame it was predicted in view
+    processed = 0
     started = time.perf_counter()
     for k, (t_s, frame) in enumerate(itertools.islice(frames, max_frames)):
         if frame is None:
@@ -121,11 +130,22 @@ def run_bank(bank: _core.SogBank, frames: Iterable[tuple[float, Any]], source: M
             bank.predict(dt)
         ids, uv_pred, cov = bank.predict_measurements()
         filter_s = time.perf_counter() - t0
+        last_in_view.update((int(fid), processed) for fid in ids)
         uv, found = source.measure(frame, ids, uv_pred, cov)
         t0 = time.perf_counter()
         report = bank.update(ids, uv, found)
         filter_s += time.perf_counter() - t0
         source.forget(report.deleted_feature_ids)
+        for fid in report.deleted_feature_ids:
+            last_in_view.pop(int(fid), None)
+        if out_of_view_frames is not None:
+            gone = np.array([fid for fid, seen in last_in_view.items() if processed - seen >= out_of_view_frames],
+                            dtype=np.int64)
+            if len(gone):
+                bank.remove_features(gone)
+                source.forget(gone)
+                for fid in gone:
+                    del last_in_view[int(fid)]
         needed = min_visible - int(report.num_used)
         if needed > 0:
             count = needed if first else min(needed, max_new_per_frame)
@@ -135,7 +155,9 @@ def run_bank(bank: _core.SogBank, frames: Iterable[tuple[float, Any]], source: M
                 new_ids = bank.add_features(new_uv)
                 filter_s += time.perf_counter() - t0
                 source.track(frame, new_ids, new_uv)
+                last_in_view.update((int(fid), processed) for fid in new_ids)
         t_prev = t_s
+        processed += 1
         rows["frame"].append(k)
         rows["mean"].append(np.asarray(bank.calibration_mean))
         rows["bounds"].append(np.asarray(bank.calibration_bounds_99()))
