@@ -41,6 +41,7 @@ import numpy as np
 import yaml
 
 from ..errors import InputError
+from .camera_formats.common import finite_number
 
 TARGET_TYPES = ("checkerboard", "circlegrid", "aprilgrid", "charuco")
 
@@ -323,16 +324,7 @@ def _field(data: dict, name: str) -> Any:
 
 
 def _number(data: dict, name: str) -> float:
-    value = _field(data, name)
-    if isinstance(value, bool):
-        raise InputError(f"field '{name}' must be a number, not {value!r}")
-    try:
-        number = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"field '{name}' must be a number, not {value!r}") from None
-    if not np.isfinite(number):
-        raise InputError(f"field '{name}' must be finite")
-    return number
+    return finite_number(_field(data, name), f"field '{name}'")
 
 
 def _length(data: dict, name: str) -> float:

@@ -44,8 +44,8 @@ MAX_FOCAL_PX = 1e7
 MAX_ABS_LINE_DELAY_S = 0.01
 
 
-def _real(value, field: str) -> float:
-    """A finite number (a string of one too), else InputError naming the field."""
+def finite_number(value, field: str) -> float:
+    """A finite number (a string of one too, not true/false), else InputError naming the field."""
     if isinstance(value, bool):
         raise InputError(f"{field} must be a number, not {value!r}")
     try:
@@ -59,7 +59,7 @@ def _real(value, field: str) -> float:
 
 def image_side_px(value, field: str) -> int:
     """A whole number of pixels in 1..MAX_IMAGE_SIDE_PX, else InputError naming the field."""
-    number = _real(value, field)
+    number = finite_number(value, field)
     if number != int(number) or not 1 <= number <= MAX_IMAGE_SIDE_PX:
         raise InputError(f"{field} must be a whole number of pixels in 1..{MAX_IMAGE_SIDE_PX}, not {number:g}")
     return int(number)
@@ -72,7 +72,7 @@ def line_delay_value(value, field: str) -> Optional[float]:
         return None
     if isinstance(value, (list, tuple, dict)):
         raise InputError(f"{field} must be a number (s/row), not {value!r}")
-    number = _real(value, f"{field} (s/row)")
+    number = finite_number(value, f"{field} (s/row)")
     if abs(number) > MAX_ABS_LINE_DELAY_S:
         raise InputError(f"{field} must be at most {MAX_ABS_LINE_DELAY_S:g} s/row in magnitude, not {number:g}")
     return number

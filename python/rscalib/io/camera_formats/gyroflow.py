@@ -16,8 +16,6 @@ import time
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
-
 from ..._core import CameraModel
 from ..._version import __version__
 from ...errors import InputError
@@ -26,6 +24,7 @@ from .common import (
     RADTAN,
     CameraFile,
     camera_from_opencv,
+    finite_number,
     image_lines,
     image_side_px,
     line_delay_value,
@@ -113,14 +112,9 @@ def read_gyroflow(path: Path, data: dict) -> CameraFile:
         line_delay = None
         if readout_ms is not None and readout_ms != 0:
             direction = data.get("frame_readout_direction")
-            line_delay = line_delay_value(_real_ms(readout_ms) * 1e-3 / image_lines(camera, direction),
+            line_delay = line_delay_value(finite_number(readout_ms, "frame_readout_time (ms)") * 1e-3 / image_lines(camera, direction),
                                           "frame_readout_time / image lines")
     except InputError as error:
         raise InputError(f"{path}: {error}") from None
     return CameraFile(camera, line_delay, "gyroflow")
 
-
-def _real_ms(value) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise InputError(f"frame_readout_time must be a number of milliseconds, not {value!r}")
-    return float(value)
