@@ -101,7 +101,8 @@ class FrameSource:
             raise InputError(f"{self.paths[0]}: no frame could be decoded")
         if clock.fallback and clock.warning not in self.warnings:
             self.warnings.append(clock.warning)
-            self.timestamps_source = "frame rate"
+            # without a frame rate the times are frame numbers, which the engines that need time refuse
+            self.timestamps_source = "frame rate" if clock.fps else "frame index"
         skipped = f"{clock.non_increasing} frame(s) skipped: container time not increasing"
         if clock.non_increasing and skipped not in self.warnings:
             self.warnings.append(skipped)

@@ -55,12 +55,12 @@ def check_segment_count(num_segments: Optional[int], frames: int) -> None:
 
 
 def require_frame_times(timestamps_source: str, source) -> None:
-    """InputError when the frames have no times (an image folder without timestamps.txt): the
-    line delay and the trajectory are measured in time, and index-as-seconds would scale them
-    (1 s per frame gives 30x the line delay of a 30 fps video)."""
+    """InputError when the frames have no times (an image folder without timestamps.txt, a video
+    with neither frame times nor a frame rate): the line delay and the trajectory are measured in
+    time, and index-as-seconds would scale them (1 s per frame: 30x the line delay at 30 fps)."""
     if timestamps_source == "frame index":
-        raise InputError(f"{source}: the images have no times: add timestamps.txt to the folder (one time per "
-                         "image, in file-name order, in seconds), or give a video")
+        raise InputError(f"{source}: the frames have no times: put timestamps.txt in the image folder (one time "
+                         "per image, in file-name order, in seconds), or give a video with frame times")
 
 
 def initial_values(observations: Observations, camera: CameraModel, rows: Optional[int],

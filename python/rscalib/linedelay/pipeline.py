@@ -287,6 +287,7 @@ def _detections(video, target, camera: CameraModel, workers, cache, cache_dir, p
                 on_detection: DetectionCallback) -> DetectionResult:
     require_frame_times(open_source(video).timestamps_source, video)  # before the slow detection
     detection = detect(video, target, camera, workers=workers, cache=cache, cache_dir=cache_dir, progress=progress)
+    require_frame_times(detection.timestamps, video)  # a video without times or frame rate
     if on_detection is not None:
         on_detection(detection)
     return detection
