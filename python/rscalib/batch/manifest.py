@@ -162,6 +162,9 @@ def _job(path: Path, number: int, where: str, fields: dict) -> Job:
         return InputError(f"{path}: {where}: field '{field}': {message}")
 
     fields = {k.strip().lstrip("-").replace("_", "-"): v for k, v in fields.items() if k is not None}
+    for name, value in fields.items():
+        if "\0" in str(value):
+            raise bad(name, "has a NUL character (not a path or a value)")
     command = str(fields.get("command") or "").strip()
     if command not in INPUT_OPTIONS:
         raise bad("command", f"'{command}' is not one of {', '.join(COMMANDS)}" if command else "missing")

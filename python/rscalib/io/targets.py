@@ -338,13 +338,13 @@ def _length(data: dict, name: str) -> float:
 
 def _count(data: dict, name: str, minimum: int) -> int:
     value = _field(data, name)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) \
-            or value != int(value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or (isinstance(value, float) and (not np.isfinite(value) or value != int(value))):
         raise InputError(f"field '{name}' must be a whole number, not {value!r}")
     if int(value) < minimum:
         raise InputError(f"field '{name}' must be at least {minimum}, not {int(value)}")
     if int(value) > MAX_GRID_SIDE:
-        raise InputError(f"field '{name}' must be at most {MAX_GRID_SIDE}, not {int(value)}")
+        raise InputError(f"field '{name}' must be at most {MAX_GRID_SIDE}, not {str(value)[:40]}")
     return int(value)
 
 
