@@ -127,6 +127,7 @@ CASES = [
     ("target-cols-negative", lambda w: w.bad_target(checkerboard(cols="-9")), ["targetCols"]),
     ("target-cols-huge", lambda w: w.bad_target(checkerboard(cols="1000000000")), ["targetCols"]),
     ("target-cols-float-huge", lambda w: w.bad_target(checkerboard(cols="1e300")), ["targetCols"]),
+    ("target-cols-30-digits", lambda w: w.bad_target(checkerboard(cols="9" * 30)), ["targetCols"]),
     ("target-cols-text", lambda w: w.bad_target(checkerboard(cols="nine")), ["targetCols"]),
     ("target-cols-list", lambda w: w.bad_target(checkerboard(cols="[9]")), ["targetCols"]),
     ("target-cols-mapping", lambda w: w.bad_target(checkerboard(cols="{a: 1}")), ["targetCols"]),
@@ -299,6 +300,7 @@ CASES = [
                                                           "  frequency: 100\n"), ["input"]),
     ("manifest-id-list", lambda w: w.batch("m.yaml", "- command: flicker\n  input: x\n  id: [1, 2]\n"
                                                     "  frequency: 100\n"), ["id"]),
+    ("manifest-nul-in-input", lambda w: w.batch("m.csv", "command,input,frequency\nflicker,a\0b,100\n"), ["input"]),
     ("manifest-no-header", lambda w: w.batch("m.csv", ""), ["command"]),
     # ---- a target that does not match the 9x6 video
     ("target-mismatch-5x4", lambda w: w.bad_target(checkerboard(cols="5", rows="4")), ["9x6"]),
