@@ -39,7 +39,7 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=seed, default=0, help="seed of the hand-held motion and the noise (0)")
     p.add_argument("--motion", type=number(0.0, 100.0), default=1.0,
                    help="amplitude of the hand-held motion; 0 = static camera (1)")
-    p.add_argument("--supersample", type=whole(1, 16), default=3, metavar="N", help="NxN sub-pixel samples per pixel (3)")
+    p.add_argument("--supersample", type=whole(1, 8), default=3, metavar="N", help="NxN sub-pixel samples per pixel (3)")
     p.add_argument("--exposure-samples", type=whole(1, 256), default=None, metavar="K",
                    help="times sampled over the exposure (default: enough for <= 0.5 px steps, at most 64)")
     p.add_argument("--frames-dir", nargs="?", const=True, default=None, metavar="DIR",
