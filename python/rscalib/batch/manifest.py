@@ -79,9 +79,17 @@ def load_manifest(path) -> list:
     return jobs
 
 
+def _text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as error:
+        raise InputError(f"{path}: not UTF-8 text (byte {error.start}); a manifest is a .csv or .yaml text file") \
+            from None
+
+
 def _csv_rows(path: Path) -> list:
-    with open(path, newline="") as f:
-        reader = csv.DictReader(f)
+    reader = csv.DictReader(io.StringIO(_text(path), newline=""))
+    try:
         if not reader.fieldnames or "command" not in [n.strip() for n in reader.fieldnames]:
             raise InputError(f"{path}: line 1: the header needs a 'command' column (and 'input')")
         rows = []
@@ -91,16 +99,19 @@ def _csv_rows(path: Path) -> list:
             fields = {k.strip(): (v or "").strip() for k, v in record.items()}
             if any(fields.values()):
                 rows.append((f"row {len(rows) + 1} (line {reader.line_num})", fields))
-        return rows
+    except csv.Error as error:
+        raise InputError(f"{path}: line {reader.line_num}: not CSV ({error})") from None
+    return rows
 
 
 def _yaml_rows(path: Path) -> list:
     import yaml
 
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml.safe_load(_text(path))
     except yaml.YAMLError as error:
-        raise InputError(f"{path}: not valid YAML: {str(error).splitlines()[0]}") from None
+        first = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise InputError(f"{path}: not valid YAML: {first}") from None
     defaults = {}
     if isinstance(data, dict):
         defaults = data.get("defaults") or {}
@@ -113,7 +124,8 @@ def _yaml_rows(path: Path) -> list:
     for number, entry in enumerate(data, start=1):
         if not isinstance(entry, dict):
             raise InputError(f"{path}: row {number}: a job is a mapping of fields (command, input, ...)")
-        rows.append((f"row {number}", {**defaults, **{str(k): v for k, v in entry.items()}}))
+        rows.append((f"row {number}", {**{str(k): v for k, v in defaults.items()},
+                                       **{str(k): v for k, v in entry.items()}}))
     return rows
 
 
@@ -122,7 +134,12 @@ def _is_blank(value) -> bool:
 
 
 def _resolve(base: Path, value) -> str:
-    return str((base / Path(str(value)).expanduser()).resolve())
+    path = Path(str(value))
+    try:
+        path = path.expanduser()
+    except RuntimeError:  # ~user of no such user: a plain name
+        pass
+    return str((base / path).resolve())
 
 
 def _option_args(flag: str, value, is_path: bool, base: Path) -> list:
@@ -145,6 +162,9 @@ def _job(path: Path, number: int, where: str, fields: dict) -> Job:
         return InputError(f"{path}: {where}: field '{field}': {message}")
 
     fields = {k.strip().lstrip("-").replace("_", "-"): v for k, v in fields.items() if k is not None}
+    for name, value in fields.items():
+        if "\0" in str(value):
+            raise bad(name, "has a NUL character (not a path or a value)")
     command = str(fields.get("command") or "").strip()
     if command not in INPUT_OPTIONS:
         raise bad("command", f"'{command}' is not one of {', '.join(COMMANDS)}" if command else "missing")
@@ -152,6 +172,8 @@ def _job(path: Path, number: int, where: str, fields: dict) -> Job:
     if _is_blank(raw_input):
         raise bad("input", "missing (the video, image folder or stills of this job)")
     items = raw_input if isinstance(raw_input, list) else str(raw_input).split(";")
+    if isinstance(raw_input, dict) or not all(isinstance(item, (str, int, float)) for item in items):
+        raise bad("input", f"a path, or a list of paths for intrinsics, not {raw_input!r}")
     inputs = [_resolve(base, item.strip() if isinstance(item, str) else item) for item in items
               if not _is_blank(item)]
     if len(inputs) > 1 and command != "intrinsics":
@@ -163,6 +185,9 @@ def _job(path: Path, number: int, where: str, fields: dict) -> Job:
             continue
         if name in RESERVED:
             raise bad(name, "is set by the batch (each job writes to DIR/jobs/<id>/)")
+        if isinstance(value, dict) or (isinstance(value, (list, tuple))
+                                       and not all(isinstance(v, (str, int, float)) for v in value)):
+            raise bad(name, f"a value or a list of values, not {value!r}")
         words = _option_args(f"--{name}", value, name in PATH_OPTIONS, base)
         argv += words
         if name in INPUT_OPTIONS[command] and len(words) == 2:

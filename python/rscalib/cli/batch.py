@@ -11,7 +11,7 @@ import argparse
 import sys
 
 from ..errors import InputError
-from .common import EXIT_INTERNAL, EXIT_OK
+from .common import EXIT_INTERNAL, EXIT_OK, number, whole, workers
 
 
 def add_parser(sub) -> None:
@@ -31,8 +31,8 @@ def add_parser(sub) -> None:
     p.add_argument("--resume", action="store_true",
                    help="continue the batch in DIR: run only the jobs without an answer, or whose inputs, options "
                         "or rscalib version changed")
-    p.add_argument("--workers", type=int, default=2, metavar="N", help="Dask worker processes of the local cluster (2)")
-    p.add_argument("--threads-per-worker", type=int, default=1, metavar="T",
+    p.add_argument("--workers", type=workers, default=2, metavar="N", help="Dask worker processes of the local cluster (2)")
+    p.add_argument("--threads-per-worker", type=whole(1, 64), default=1, metavar="T",
                    help="jobs at once per worker (1); each job's own threads are capped at 1")
     p.add_argument("--memory-limit", default="auto", metavar="BYTES",
                    help="memory per worker, e.g. 4GB (auto: the machine's memory / workers); a job over its share "
@@ -41,7 +41,7 @@ def add_parser(sub) -> None:
                    help="an existing Dask scheduler instead of a local cluster (workers need rscalib and the "
                         "inputs and DIR on a shared file system; --workers, --threads-per-worker and "
                         "--memory-limit are then the cluster's own)")
-    p.add_argument("--job-timeout", type=float, default=None, metavar="S", help="kill a job running longer than S "
+    p.add_argument("--job-timeout", type=number(0.0, 1e7, " s", low_open=True), default=None, metavar="S", help="kill a job running longer than S "
                                                                                 "seconds (no limit)")
     p.set_defaults(func=run)
 

@@ -1,4 +1,11 @@
-"""Shared pieces of the subcommands: exit codes (README: exit codes)."""
+"""Shared pieces of the subcommands: exit codes (README: exit codes) and the range-checked
+argparse converters of their options."""
+from __future__ import annotations
+
+import argparse
+import math
+import re
+from typing import Callable, Optional
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2       # a one-line reason on stderr, no traceback
@@ -8,3 +15,93 @@ EXIT_INTERNAL = 1        # an unexpected error (one line; RSCALIB_DEBUG=1 shows 
 
 # Where a user learns how to film what each command needs; printed with every "do not trust" verdict.
 CAPTURE_GUIDE = "docs/capture.md (in the rscalib repository): how to film for each command"
+
+
+# ---- argparse `type=` converters: a value out of range is one line naming the option (exit 2),
+# e.g. "rscalib linedelay: error: argument --pixel-sigma: must be in [0.0001, 100] px, not 1e-300".
+
+def number(low: Optional[float] = None, high: Optional[float] = None, unit: str = "", *,
+           low_open: bool = False) -> Callable[[str], float]:
+    """A converter to a finite float in [low, high] ((low, high] with low_open), NaN and inf refused."""
+    def convert(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        too_low = low is not None and (value <= low if low_open else value < low)
+        if not math.isfinite(value) or too_low or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"must be {_range_words(low, high, low_open)}{unit}, not {text}")
+        return value
+    return convert
+
+
+def whole(low: int, high: Optional[int] = None, unit: str = "", why: str = "") -> Callable[[str], int]:
+    """A converter to an int in [low, high]; `why` says where the upper bound comes from."""
+    def convert(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+        if value < low or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"must be {_range_words(low, high, False)}{unit}{why}, not {text}")
+        return value
+    return convert
+
+
+def _range_words(low, high, low_open: bool) -> str:
+    if low is not None and high is not None:
+        return f"in {'(' if low_open else '['}{low:g}, {high:g}]"
+    if low is not None:
+        return f"{'>' if low_open else '>='} {low:g}"
+    return "finite" if high is None else f"<= {high:g}"
+
+
+def workers(text: str) -> int:
+    """Processes or threads: 1 to the usable cores (more only share the cores, and each costs memory)."""
+    from ..detection.pipeline import usable_cores
+
+    cores = usable_cores()
+    return whole(1, cores, why=f" (this machine has {cores} usable cores)")(text)
+
+
+def seed(text: str) -> int:
+    """A random seed: 0 to 2^32 - 1 (what every generator takes)."""
+    return whole(0, 2 ** 32 - 1)(text)
+
+
+def seconds_in(low: float, high: float, *, low_open: bool = False) -> Callable[[str], float]:
+    """A converter to a time in seconds, optionally with a unit (30e-6, 30us, 0.03ms, 5ms, 1s), in
+    [low, high] ((low, high] with low_open)."""
+    def convert(text: str) -> float:
+        match = re.fullmatch(r"\s*([-+]?[0-9.]+(?:[eE][-+]?[0-9]+)?)\s*(s|ms|us|µs|ns)?\s*", text)
+        if not match:
+            raise argparse.ArgumentTypeError(f"not a time: {text!r} (e.g. 30e-6, 30us, 5ms)")
+        try:
+            value = float(match.group(1)) * _TIME_UNITS[match.group(2) or ""]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a time: {text!r} (e.g. 30e-6, 30us, 5ms)") from None
+        return number(low, high, " s", low_open=low_open)(repr(value))
+    return convert
+
+
+_TIME_UNITS = {"": 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
+
+
+def image_size(text: str) -> str:
+    """WIDTHxHEIGHT, each side 16..8192 px and at most 4096 x 4096 pixels in all (rendering memory);
+    returned as given."""
+    match = re.fullmatch(r"(\d+)x(\d+)", text.strip())
+    if not match:
+        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT, e.g. 640x480, not {text!r}")
+    width, height = int(match.group(1)), int(match.group(2))
+    if not (16 <= width <= 8192 and 16 <= height <= 8192 and width * height <= 4096 * 4096):
+        raise argparse.ArgumentTypeError(f"{text}: each side 16 to 8192 px, at most {4096 * 4096} pixels")
+    return text.strip()
+
+
+# Ranges shared by several commands
+PIXEL_SIGMA = number(1e-4, 100.0, " px")            # detection noise: 0.0001 px is beyond any detector
+LINE_DELAY_S = number(-0.01, 0.01, " s/row")         # 10 ms a row: a 100-row sensor read in a second
+ROWS = whole(1, 100_000, " rows")
+FRAMES = whole(1, 10_000_000, " frames")
+FOCAL_PX = number(0.0, 1e7, " px", low_open=True)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .._version import __version__
 from ..io.output_folder import check_output_folder, expected_output_bytes
-from .common import EXIT_OK
+from .common import EXIT_OK, number, seed
 
 
 def add_parser(sub) -> None:
@@ -18,9 +18,9 @@ def add_parser(sub) -> None:
                           description="Render a synthetic rolling-shutter video with a known line delay, "
                                       "calibrate it (detection, trajectory, line delay, report) and print truth "
                                       "vs estimate.")
-    demo.add_argument("--line-delay-us", type=float, default=30.0, help="true line delay in us/row (30)")
-    demo.add_argument("--duration", type=float, default=4.0, help="seconds of video (4)")
-    demo.add_argument("--seed", type=int, default=0, help="random seed of the motion and noise (0)")
+    demo.add_argument("--line-delay-us", type=number(0.0, 1e4, " us/row", low_open=True), default=30.0, help="true line delay in us/row (30)")
+    demo.add_argument("--duration", type=number(0.5, 600.0, " s"), default=4.0, help="seconds of video (4)")
+    demo.add_argument("--seed", type=seed, default=0, help="random seed of the motion and noise (0)")
     demo.add_argument("--out", default=None, help="folder for the video and results (default: a new temp folder)")
     demo.add_argument("--observations-only", action="store_true",
                       help="skip rendering and detection: simulate corner observations directly (seconds)")

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import CAPTURE_GUIDE, EXIT_OK, EXIT_UNDETERMINED
+from .common import CAPTURE_GUIDE, EXIT_OK, EXIT_UNDETERMINED, FRAMES, ROWS, number
 
 
 def add_parser(sub) -> None:
@@ -28,10 +28,10 @@ def add_parser(sub) -> None:
                                    "determine d (no bands, aliasing), with the reason in result.json.")
     p.add_argument("source", metavar="IMAGES_OR_VIDEO",
                    help="video file, or a folder of images (file-name order, optional timestamps.txt)")
-    p.add_argument("--frequency", type=float, required=True, metavar="HZ",
+    p.add_argument("--frequency", type=number(0.0, 1e6, " Hz", low_open=True), required=True, metavar="HZ",
                    help="the light's intensity frequency in Hz (twice the mains frequency for mains lamps: 100 or 120)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
-    p.add_argument("--rows", type=int, default=None, help="sensor rows read out, for the readout time "
+    p.add_argument("--rows", type=ROWS, default=None, help="sensor rows read out, for the readout time "
                                                          "(default: image height)")
     p.add_argument("--roi", default=None, metavar="x,y,w,h",
                    help="region whose columns are averaged (default: chosen automatically: the column strips "
@@ -41,7 +41,7 @@ def add_parser(sub) -> None:
     p.add_argument("--readout", choices=["auto", "top-to-bottom", "bottom-to-top"], default="auto",
                    help="readout direction: auto (measured by the phase drift of timestamped frames; else "
                         "top-to-bottom is assumed and said), or given (bottom-to-top: negative line delay)")
-    p.add_argument("--max-frames", type=int, default=None, metavar="N", help="use the first N readable frames")
+    p.add_argument("--max-frames", type=FRAMES, default=None, metavar="N", help="use the first N readable frames")
     p.add_argument("--method", choices=["auto", "spectrum", "phase-drift"], default="auto",
                    help="auto (phase drift when the frames have timestamps, else spectrum), spectrum, phase-drift")
     p.add_argument("--quiet", action="store_true", help="no progress output")

@@ -5,7 +5,7 @@ import argparse
 import json
 from dataclasses import replace
 
-from .common import EXIT_OK
+from .common import EXIT_OK, number, whole, workers
 
 
 def add_parser(sub) -> None:
@@ -22,12 +22,12 @@ def add_parser(sub) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--model", choices=["pinhole-radtan", "pinhole-equidistant"], default="pinhole-radtan",
                    help="camera model (pinhole-radtan)")
-    p.add_argument("--max-views", type=int, default=40, metavar="N",
+    p.add_argument("--max-views", type=whole(3, 10_000, " views"), default=40, metavar="N",
                    help="use at most N views, chosen sharp and well spread (40)")
-    p.add_argument("--workers", type=int, default=None, metavar="N", help="detection processes (all cores)")
-    p.add_argument("--max-blur-px", type=float, default=None, metavar="PX",
+    p.add_argument("--workers", type=workers, default=None, metavar="N", help="detection processes (all cores)")
+    p.add_argument("--max-blur-px", type=number(0.0, 100.0, " px", low_open=True), default=None, metavar="PX",
                    help="drop frames whose edges are wider than this (8)")
-    p.add_argument("--subpix-window", type=int, default=None, metavar="PX",
+    p.add_argument("--subpix-window", type=whole(1, 50, " px"), default=None, metavar="PX",
                    help="cornerSubPix half-window (default: a quarter of the grid step; OpenCV's sample uses 11)")
     p.add_argument("--no-cache", action="store_true", help="detect again even if cached detections exist")
     p.add_argument("--cache-dir", default=None, metavar="DIR", help="detection cache (~/.cache/rscalib/detections)")

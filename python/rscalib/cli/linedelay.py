@@ -11,7 +11,18 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import CAPTURE_GUIDE, EXIT_NOT_TRUSTED, EXIT_OK, EXIT_UNDETERMINED
+from .common import (
+    CAPTURE_GUIDE,
+    EXIT_NOT_TRUSTED,
+    EXIT_OK,
+    EXIT_UNDETERMINED,
+    LINE_DELAY_S,
+    PIXEL_SIGMA,
+    ROWS,
+    number,
+    whole,
+    workers,
+)
 from .intrinsics import add_lens_profile_options, lens_profile_names
 
 # `rscalib linedelay` exit codes (README: exit codes): 0 trusted, 2 bad input, 3 undetermined, and
@@ -20,6 +31,10 @@ EXIT_CODES_HELP = ("exit codes: 0 the line delay is estimated and every check pa
                    "written, no number claimed); 4 estimated but not trusted: a check failed (J/2N, the halves' "
                    "self-check, coverage, uncertainty; the report says which and what to film differently); "
                    "1 internal error")
+
+# Equal segments at most: each adds 6 unknowns and a band of the Jacobian (more than a few per frame
+# are not determined by the data; the solver's memory grows with their square in the covariance).
+MAX_UNIFORM_KNOTS = 5000
 
 # engine words -> the flags a CLI user can type
 _FLAG_WORDS = (("robust_loss='huber'", "--robust huber"), ("lower min_segment_s", "lower --min-segment-ms"),
@@ -33,12 +48,12 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                    help="camera file: OpenCV YAML, Kalibr camchain, ROS camera_info, mrcal .cameramodel, COLMAP "
                         "cameras.txt or Gyroflow profile (docs/formats.md)")
     p.add_argument("--out", required=True, help="output folder (created)")
-    p.add_argument("--pixel-sigma", type=float, default=None,
+    p.add_argument("--pixel-sigma", type=PIXEL_SIGMA, default=None,
                    help="detection noise in px (default: estimated from the target grid)")
     p.add_argument("--robust", choices=["none", "huber", "cauchy"], default="none",
                    help="robust loss on the standardised errors, against bad detections (none)")
-    p.add_argument("--rows", type=int, default=None, help="sensor rows read out (default: image height)")
-    p.add_argument("--workers", type=int, default=None, help="detection processes (default: all cores)")
+    p.add_argument("--rows", type=ROWS, default=None, help="sensor rows read out (default: image height)")
+    p.add_argument("--workers", type=workers, default=None, help="detection processes (default: all cores)")
     p.add_argument("--no-cache", action="store_true", help="re-run detection even if cached")
     p.add_argument("--quiet", action="store_true", help="no progress output")
 
@@ -52,16 +67,16 @@ def add_parser(sub) -> None:
                                    "docs/formats.md).",
                        epilog=EXIT_CODES_HELP)
     _add_common(p)
-    p.add_argument("--start", type=float, default=None, metavar="S", help="use frames from S seconds on")
-    p.add_argument("--end", type=float, default=None, metavar="S", help="use frames up to S seconds")
+    p.add_argument("--start", type=number(), default=None, metavar="S", help="use frames from S seconds on")
+    p.add_argument("--end", type=number(), default=None, metavar="S", help="use frames up to S seconds")
     p.add_argument("--readout", choices=["auto", "top-down", "bottom-up", "left-right", "right-left"], default="auto",
                    help="sensor readout direction in the image (auto: top-down, or from a portrait video's rotation "
                         "metadata, which turns sensor rows into image columns)")
-    p.add_argument("--min-segment-ms", type=float, default=None, metavar="MS",
+    p.add_argument("--min-segment-ms", type=number(0.0, 1e6, " ms", low_open=True), default=None, metavar="MS",
                    help="shortest knot segment the adaptation may create (default: half a frame, at most 16.7 ms)")
     p.add_argument("--no-self-check", action="store_true",
                    help="do not solve the two halves of the video separately (faster; the error bar is not checked)")
-    p.add_argument("--max-rounds", type=int, default=8, help="knot-adaptation rounds at most (8)")
+    p.add_argument("--max-rounds", type=whole(1, 100), default=8, help="knot-adaptation rounds at most (8)")
     add_lens_profile_options(p)
     advanced = p.add_argument_group("advanced (baselines and ablations for experiments; the defaults are the method)")
     advanced.add_argument("--noise-model", choices=["frame", "video"], default="frame",
@@ -70,7 +85,7 @@ def add_parser(sub) -> None:
     advanced.add_argument("--trajectory", choices=["spline", "linear"], default="spline",
                           help="trajectory model: a smooth curve through time (spline, default) or the baseline of "
                                "per-frame poses interpolated linearly between frames (linear)")
-    advanced.add_argument("--uniform-knots", type=int, default=None, metavar="N",
+    advanced.add_argument("--uniform-knots", type=whole(1, MAX_UNIFORM_KNOTS, " segments"), default=None, metavar="N",
                           help="spline only: N equal time segments, no adaptation to the motion")
     advanced.add_argument("--no-standardise", action="store_true",
                           help="spline only: treat every detection's error as plain pixel noise, ignoring how "
@@ -93,7 +108,7 @@ def add_parser(sub) -> None:
                                    "trajectory.csv (world-to-camera) and trajectory_tum.txt (TUM format, "
                                    "camera-to-world).")
     _add_common(q)
-    q.add_argument("--line-delay", type=float, default=None,
+    q.add_argument("--line-delay", type=LINE_DELAY_S, default=None,
                    help="line delay in s/row (default: from the camera file, if it has one)")
     q.add_argument("--model", choices=["rs-spline", "gs-pnp"], default="rs-spline",
                    help="rs-spline: continuous-time rolling-shutter trajectory (default); gs-pnp: per-frame "

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import CAPTURE_GUIDE, EXIT_OK, EXIT_UNDETERMINED
+from .common import CAPTURE_GUIDE, EXIT_OK, EXIT_UNDETERMINED, FOCAL_PX, FRAMES, number
 
 
 def add_parser(sub) -> None:
@@ -21,22 +21,22 @@ def add_parser(sub) -> None:
                                    "file-name order with an optional timestamps.txt (one time in seconds per line).")
     p.add_argument("source", help="video file or image folder")
     p.add_argument("--out", required=True, help="output folder (created)")
-    p.add_argument("--pixel-size-mm", type=float, default=0.0112,
+    p.add_argument("--pixel-size-mm", type=number(1e-4, 1.0, " mm"), default=0.0112,
                    help="sensor pixel pitch in mm (the distortion radii are in mm; default 0.0112)")
-    p.add_argument("--max-frames", type=int, default=None, help="stop after this many frames")
-    p.add_argument("--f-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+    p.add_argument("--max-frames", type=FRAMES, default=None, help="stop after this many frames")
+    p.add_argument("--f-range", type=FOCAL_PX, nargs=2, default=None, metavar=("LO", "HI"),
                    help="focal lengths in px the candidates start from (default: a wide range for the image size)")
     advanced = p.add_argument_group("advanced (baselines and tuning for experiments; the defaults are the method)")
-    advanced.add_argument("--alpha", type=float, default=None,
+    advanced.add_argument("--alpha", type=number(0.0, 1.0, low_open=True), default=None,
                           help="chance of dropping a right candidate camera too early (default 0.05)")
-    advanced.add_argument("--beta", type=float, default=None,
+    advanced.add_argument("--beta", type=number(0.0, 1.0, low_open=True), default=None,
                           help="chance of keeping a wrong candidate camera too long (default 0.1)")
     advanced.add_argument("--bank", choices=["sog", "single"], default="sog",
                           help="sog: many candidate cameras side by side (default); single: one filter started at "
                                "--f0 with --f-sigma (the baseline that can lock onto a wrong focal length)")
-    advanced.add_argument("--f0", type=float, default=None,
+    advanced.add_argument("--f0", type=FOCAL_PX, default=None,
                           help="with --bank single: initial focal length in px (default: the middle of the f range)")
-    advanced.add_argument("--f-sigma", type=float, default=None,
+    advanced.add_argument("--f-sigma", type=FOCAL_PX, default=None,
                           help="with --bank single: initial sigma of f in px (default: a quarter of the f range)")
     p.add_argument("--subpixel", choices=["affine", "parabola"], default="affine",
                    help="match refinement: ECC affine alignment of the patch (default) or a parabola through "

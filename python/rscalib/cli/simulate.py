@@ -7,17 +7,10 @@ import re
 import sys
 
 from ..errors import InputError
-from .common import EXIT_OK
+from .common import EXIT_OK, image_size, number, seconds_in, seed, whole, workers
 
-_TIME_UNITS = {"": 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
-
-
-def seconds(text: str) -> float:
-    """A duration in seconds, optionally with a unit: 30e-6, 30us, 0.03ms, 5ms, 1s."""
-    match = re.fullmatch(r"\s*([-+]?[0-9.]+(?:[eE][-+]?[0-9]+)?)\s*(s|ms|us|µs|ns)?\s*", text)
-    if not match:
-        raise argparse.ArgumentTypeError(f"not a time: {text!r} (e.g. 30e-6, 30us, 5ms)")
-    return float(match.group(1)) * _TIME_UNITS[match.group(2) or ""]
+# Renders of at most an hour (the dense trajectory and the truth grow with the duration).
+MAX_DURATION_S = 3600.0
 
 
 def add_parser(sub) -> None:
@@ -29,37 +22,37 @@ def add_parser(sub) -> None:
                     "exact rolling-shutter projections of the target points), camera.yaml (OpenCV) and "
                     "target.yaml (Kalibr).")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
-    p.add_argument("--line-delay", type=seconds, default=30e-6, metavar="D",
+    p.add_argument("--line-delay", type=seconds_in(-0.01, 0.01), default=30e-6, metavar="D",
                    help="line delay d per row, seconds or with a unit (30us)")
-    p.add_argument("--fps", type=float, default=30.0, help="frame rate (30); frame i is stamped i/fps")
-    p.add_argument("--size", default="640x480", metavar="WxH",
+    p.add_argument("--fps", type=number(1.0, 1000.0, " fps"), default=30.0, help="frame rate (30); frame i is stamped i/fps")
+    p.add_argument("--size", type=image_size, default="640x480", metavar="WxH",
                    help="image size WIDTHxHEIGHT of the default camera; f = 500 px * width/640 (640x480)")
     p.add_argument("--camera", default=None, metavar="FILE",
                    help="camera file (OpenCV YAML or Kalibr camchain) instead of the default camera; sets the size")
     p.add_argument("--target", default="checkerboard", metavar="TARGET",
                    help="checkerboard (9x6, 40 mm), circlegrid (7x5, 40 mm), acircles (4x11, 20 mm), "
                         "aprilgrid (Kalibr 6x6, 88 mm) or a Kalibr target YAML (default checkerboard)")
-    p.add_argument("--duration", type=seconds, default=5.0, metavar="T", help="seconds of video (5)")
-    p.add_argument("--exposure", type=seconds, default=0.0, metavar="E",
+    p.add_argument("--duration", type=seconds_in(0.0, MAX_DURATION_S, low_open=True), default=5.0, metavar="T", help="seconds of video (5)")
+    p.add_argument("--exposure", type=seconds_in(0.0, 1.0), default=0.0, metavar="E",
                    help="exposure per row, seconds or with a unit (0 = no motion blur)")
-    p.add_argument("--noise", type=float, default=2.0, help="Gaussian intensity noise, 8-bit grey levels (2)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the hand-held motion and the noise (0)")
-    p.add_argument("--motion", type=float, default=1.0,
+    p.add_argument("--noise", type=number(0.0, 255.0), default=2.0, help="Gaussian intensity noise, 8-bit grey levels (2)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the hand-held motion and the noise (0)")
+    p.add_argument("--motion", type=number(0.0, 100.0), default=1.0,
                    help="amplitude of the hand-held motion; 0 = static camera (1)")
-    p.add_argument("--supersample", type=int, default=3, metavar="N", help="NxN sub-pixel samples per pixel (3)")
-    p.add_argument("--exposure-samples", type=int, default=None, metavar="K",
+    p.add_argument("--supersample", type=whole(1, 8), default=3, metavar="N", help="NxN sub-pixel samples per pixel (3)")
+    p.add_argument("--exposure-samples", type=whole(1, 256), default=None, metavar="K",
                    help="times sampled over the exposure (default: enough for <= 0.5 px steps, at most 64)")
     p.add_argument("--frames-dir", nargs="?", const=True, default=None, metavar="DIR",
                    help="also write PNG frames and timestamps.txt (default folder OUT/frames)")
     p.add_argument("--no-video", action="store_true", help="do not write the video file (use with --frames-dir)")
     p.add_argument("--codec", choices=["auto", "ffv1", "mjpg"], default="auto",
                    help="video codec: FFV1 (lossless), MJPG (lossy) or auto (FFV1, else MJPG)")
-    p.add_argument("--flicker-hz", type=float, default=None, metavar="HZ",
+    p.add_argument("--flicker-hz", type=number(0.0, 1e6, " Hz", low_open=True), default=None, metavar="HZ",
                    help="light flickering at HZ (its intensity frequency: 100 for 50 Hz mains), for `rscalib flicker`")
-    p.add_argument("--flicker-depth", type=float, default=0.3, metavar="A",
+    p.add_argument("--flicker-depth", type=number(0.0, 1.0), default=0.3, metavar="A",
                    help="flicker modulation depth: gain 1 + A sin(2 pi HZ t + phase) (0.3)")
-    p.add_argument("--flicker-phase", type=float, default=0.0, metavar="RAD", help="flicker phase at t = 0, radians (0)")
-    p.add_argument("--workers", type=int, default=None, metavar="N", help="rendering threads (default: up to 4)")
+    p.add_argument("--flicker-phase", type=number(-1e3, 1e3, " rad"), default=0.0, metavar="RAD", help="flicker phase at t = 0, radians (0)")
+    p.add_argument("--workers", type=workers, default=None, metavar="N", help="rendering threads (default: up to 4)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.add_argument("--scene", action="store_true",
                    help="instead of a target video: a hand-held walk through a textured room, seen by the "
@@ -73,20 +66,20 @@ def add_parser(sub) -> None:
         "--size, --fps, --exposure, --noise, --seed; frames from --duration unless --frames is given.")
     led.add_argument("--led", action="store_true", help="render LED / flicker footage (writes frames, "
                      "timestamps.txt and truth.json in OUT)")
-    led.add_argument("--frames", type=int, default=None, metavar="N", help="number of frames (e.g. 1 for a still)")
+    led.add_argument("--frames", type=whole(1, 10000), default=None, metavar="N", help="number of frames (e.g. 1 for a still)")
     led.add_argument("--waveform", choices=["square", "sine"], default="square", help="light waveform (square)")
-    led.add_argument("--duty", type=float, default=0.5, help="fraction of each period the light is on (0.5)")
-    led.add_argument("--off-level", type=float, default=0.0, metavar="L",
+    led.add_argument("--duty", type=number(0.0, 1.0), default=0.5, help="fraction of each period the light is on (0.5)")
+    led.add_argument("--off-level", type=number(0.0, 1.0), default=0.0, metavar="L",
                      help="light level when off, relative to on (0)")
     led.add_argument("--lamp", choices=["flat", "disk", "partial"], default="flat",
                      help="flat: the light fills the frame; disk: a lit disk on a dark surround; partial: the "
                           "light covers the left part of the frame (flat)")
-    led.add_argument("--brightness", type=float, default=0.8,
+    led.add_argument("--brightness", type=number(0.0, 100.0), default=0.8,
                      help="level of the light when on, fraction of full scale; above 1 the bands clip (0.8)")
-    led.add_argument("--vignetting", type=float, default=0.0, help="relative fall-off at the corners (0)")
+    led.add_argument("--vignetting", type=number(0.0, 1.0), default=0.0, help="relative fall-off at the corners (0)")
     led.add_argument("--overlay", default=None, metavar="TEXT", help="a text overlay and a box drawn on the frames")
     led.add_argument("--blob", action="store_true", help="an out-of-focus bright blob on the right")
-    led.add_argument("--jpeg-quality", type=int, default=None, metavar="Q",
+    led.add_argument("--jpeg-quality", type=whole(1, 100), default=None, metavar="Q",
                      help="write JPEG frames at quality Q (default: lossless PNG)")
     led.add_argument("--readout", choices=["top-to-bottom", "bottom-to-top"], default="top-to-bottom",
                      help="sensor readout direction; bottom-to-top gives a negative line delay (top-to-bottom)")

@@ -41,8 +41,15 @@ import numpy as np
 import yaml
 
 from ..errors import InputError
+from .camera_formats.common import finite_number
 
 TARGET_TYPES = ("checkerboard", "circlegrid", "aprilgrid", "charuco")
+
+# What a target file may say: lengths from 10 um to 100 m, grids of at most 1000 along a side and
+# 10 000 points (detection, edges and the solver scale with the points; real boards have < 1000).
+MIN_LENGTH_M, MAX_LENGTH_M = 1e-5, 100.0
+MAX_GRID_SIDE = 1000
+MAX_TARGET_POINTS = 10_000
 
 # Kalibr draws its tags with a 2-bit black border (OpenCV's default is 1 bit).
 APRILGRID_BORDER_BITS = 2
@@ -250,7 +257,7 @@ def target_from_dict(data: Any) -> Target:
         raise InputError(f"missing field 'target_type' (one of {', '.join(TARGET_TYPES)})")
     kind = str(kind).strip().lower()
     if kind == "checkerboard":
-        cols, rows = _count(data, "targetCols", 2), _count(data, "targetRows", 2)
+        cols, rows = _grid_size(data, "targetCols", "targetRows", 2)
         spec = {"targetCols": cols, "targetRows": rows,
                 "rowSpacingMeters": _length(data, "rowSpacingMeters"),
                 "colSpacingMeters": _length(data, "colSpacingMeters")}
@@ -258,7 +265,7 @@ def target_from_dict(data: Any) -> Target:
         points = np.column_stack([c * spec["colSpacingMeters"], r * spec["rowSpacingMeters"], np.zeros(r.size)])
         return Target(kind, spec, points, (rows, cols), _grid_edges(rows, cols))
     if kind == "circlegrid":
-        cols, rows = _count(data, "targetCols", 2), _count(data, "targetRows", 2)
+        cols, rows = _grid_size(data, "targetCols", "targetRows", 2)
         asymmetric = data.get("asymmetricGrid", False)
         if not isinstance(asymmetric, bool):
             raise InputError(f"field 'asymmetricGrid' must be true or false, not {asymmetric!r}")
@@ -273,7 +280,7 @@ def target_from_dict(data: Any) -> Target:
         points = np.column_stack([x, r, np.zeros(r.size)]) * spec["spacingMeters"]
         return Target(kind, spec, points, (rows, cols), _nearest_pairs(points))
     if kind == "aprilgrid":
-        tag_cols, tag_rows = _count(data, "tagCols", 1), _count(data, "tagRows", 1)
+        tag_cols, tag_rows = _grid_size(data, "tagCols", "tagRows", 1, points_per_cell=4)
         spec = {"tagCols": tag_cols, "tagRows": tag_rows, "tagSize": _length(data, "tagSize"),
                 "tagSpacing": _number(data, "tagSpacing")}
         if not 0 < spec["tagSpacing"] < 10:
@@ -290,10 +297,15 @@ def target_from_dict(data: Any) -> Target:
         sides = np.concatenate([corners[:, [0, 1]], corners[:, [1, 2]], corners[:, [2, 3]], corners[:, [3, 0]]])
         return Target(kind, spec, points, (rows, cols), sides)
     if kind == "charuco":
-        spec = {"squaresX": _count(data, "squaresX", 2), "squaresY": _count(data, "squaresY", 2),
+        squares_x, squares_y = _grid_size(data, "squaresX", "squaresY", 2)
+        dictionary, legacy = data.get("dictionary", "DICT_5X5_100"), data.get("legacyPattern", False)
+        if not isinstance(dictionary, str):
+            raise InputError(f"field 'dictionary' must be an OpenCV name such as DICT_5X5_100, not {dictionary!r}")
+        if not isinstance(legacy, bool):
+            raise InputError(f"field 'legacyPattern' must be true or false, not {legacy!r}")
+        spec = {"squaresX": squares_x, "squaresY": squares_y,
                 "squareLength": _length(data, "squareLength"), "markerLength": _length(data, "markerLength"),
-                "dictionary": str(data.get("dictionary", "DICT_5X5_100")).strip(),
-                "legacyPattern": bool(data.get("legacyPattern", False))}
+                "dictionary": dictionary.strip(), "legacyPattern": legacy}
         if spec["markerLength"] >= spec["squareLength"]:
             raise InputError("field 'markerLength' must be smaller than 'squareLength'")
         board = _charuco_board(spec)
@@ -312,30 +324,38 @@ def _field(data: dict, name: str) -> Any:
 
 
 def _number(data: dict, name: str) -> float:
-    value = _field(data, name)
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"field '{name}' must be a number, not {value!r}") from None
-    if not np.isfinite(number):
-        raise InputError(f"field '{name}' must be finite")
-    return number
+    return finite_number(_field(data, name), f"field '{name}'")
 
 
 def _length(data: dict, name: str) -> float:
     value = _number(data, name)
     if value <= 0:
         raise InputError(f"field '{name}' must be positive (metres), not {value}")
+    if not MIN_LENGTH_M <= value <= MAX_LENGTH_M:
+        raise InputError(f"field '{name}' must be between {MIN_LENGTH_M:g} and {MAX_LENGTH_M:g} m, not {value:g}")
     return value
 
 
 def _count(data: dict, name: str, minimum: int) -> int:
     value = _field(data, name)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != int(value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or (isinstance(value, float) and (not np.isfinite(value) or value != int(value))):
         raise InputError(f"field '{name}' must be a whole number, not {value!r}")
     if int(value) < minimum:
         raise InputError(f"field '{name}' must be at least {minimum}, not {int(value)}")
+    if int(value) > MAX_GRID_SIDE:
+        raise InputError(f"field '{name}' must be at most {MAX_GRID_SIDE}, not {str(value)[:40]}")
     return int(value)
+
+
+def _grid_size(data: dict, cols_name: str, rows_name: str, minimum: int, points_per_cell: int = 1
+               ) -> tuple[int, int]:
+    """(cols, rows) of a grid, each in range and with at most MAX_TARGET_POINTS points in all."""
+    cols, rows = _count(data, cols_name, minimum), _count(data, rows_name, minimum)
+    if cols * rows * points_per_cell > MAX_TARGET_POINTS:
+        raise InputError(f"fields '{cols_name}' x '{rows_name}' ({cols} x {rows}) give "
+                         f"{cols * rows * points_per_cell} points; at most {MAX_TARGET_POINTS}")
+    return cols, rows
 
 
 def _grid_edges(rows: int, cols: int) -> np.ndarray:
@@ -347,14 +367,14 @@ def _grid_edges(rows: int, cols: int) -> np.ndarray:
 
 
 def _nearest_pairs(points: np.ndarray) -> np.ndarray:
-    """Each point with every point at its nearest-neighbour distance (circle grids)."""
-    xy = points[:, :2]
-    dist = np.linalg.norm(xy[:, None] - xy[None], axis=2)
-    np.fill_diagonal(dist, np.inf)
-    nearest = dist.min()
-    i, j = np.nonzero(np.isclose(dist, nearest, rtol=1e-6))
-    keep = i < j
-    return np.column_stack([i[keep], j[keep]]).astype(np.int64)
+    """Each point with every point at its nearest-neighbour distance (circle grids); a k-d tree,
+    so memory grows with the points, not their square."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(points[:, :2])
+    nearest = tree.query(points[:, :2], k=2)[0][:, 1].min()
+    pairs = sorted(tree.query_pairs(nearest * (1 + 1e-6) + 1e-8))
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2)
 
 
 def _aruco_dictionary(name: str):

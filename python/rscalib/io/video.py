@@ -5,8 +5,9 @@ time (CAP_PROP_POS_MSEC after each grab), so variable frame rates need nothing s
 frame whose time does not increase is skipped (`bad_timestamp`). Only when the container has no
 times at all (every frame reports 0) do times fall back to index / fps, with a warning.
 Image folders are read in file-name order (numbers compared by value, so frame2 < frame10),
-with times from `timestamps.txt` in the folder (one time in seconds per line, in that order)
-or else the image index (0, 1, 2, ... s). Nothing is kept in memory between frames.
+with times from `timestamps.txt` in the folder (one time per line, in that order; seconds, or
+ms, us or ns told by the frame rate and converted) or else the image index (0, 1, 2, ... s:
+timestamps_source "frame index", which the engines that need time refuse). Nothing is kept in memory between frames.
 """
 from __future__ import annotations
 
@@ -100,7 +101,8 @@ class FrameSource:
             raise InputError(f"{self.paths[0]}: no frame could be decoded")
         if clock.fallback and clock.warning not in self.warnings:
             self.warnings.append(clock.warning)
-            self.timestamps_source = "frame rate"
+            # without a frame rate the times are frame numbers, which the engines that need time refuse
+            self.timestamps_source = "frame rate" if clock.fps else "frame index"
         skipped = f"{clock.non_increasing} frame(s) skipped: container time not increasing"
         if clock.non_increasing and skipped not in self.warnings:
             self.warnings.append(skipped)
@@ -157,22 +159,52 @@ def _is_image(path) -> bool:
     return Path(path).suffix.lower() in IMAGE_EXTENSIONS
 
 
-def read_timestamps(path, count: int) -> np.ndarray:
-    """Times (s) from a timestamps file: one number per line (blank lines and # comments skipped)."""
+# Plausible frame intervals of a video, 1 ms to 1 s (1000 to 1 fps): the unit of a timestamps
+# file is the one that puts its median frame interval in this range (EuRoC writes nanoseconds).
+MIN_FRAME_INTERVAL_S, MAX_FRAME_INTERVAL_S = 1e-3, 1.0
+TIME_UNITS = (("seconds", 1), ("milliseconds", 10 ** 3), ("microseconds", 10 ** 6), ("nanoseconds", 10 ** 9))
+MAX_ABS_TIME_S = 1e10   # about 300 years: larger is not a time of day or since an epoch
+
+
+def _time_value(text: str):
+    """An int when the text is one (nanoseconds since an epoch need all 19 digits), else a float."""
+    return int(text) if re.fullmatch(r"[-+]?\d+", text) else float(text)
+
+
+def read_timestamps(path, count: int, notes: Optional[list] = None) -> np.ndarray:
+    """Times (s) from a timestamps file: one number per line (blank lines and # comments skipped),
+    in seconds, or in ms, us or ns when the frame rate says so (then converted, with a line in
+    `notes`); InputError naming the file and the reason otherwise."""
     values = []
     for number, line in enumerate(Path(path).read_text(errors="replace").splitlines(), start=1):
         text = line.split("#", 1)[0].strip()
         if not text:
             continue
         try:
-            values.append(float(text.split()[0].rstrip(",")))
-        except ValueError:
+            values.append(_time_value(text.split()[0].rstrip(",")))
+        except (ValueError, OverflowError):
             raise InputError(f"{path}:{number}: not a time in seconds: {line.strip()[:40]!r}") from None
-    times = np.asarray(values, dtype=np.float64)
-    if len(times) != count:
-        raise InputError(f"{path}: {len(times)} timestamps for {count} images (need one per image)")
-    if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+    if len(values) != count:
+        raise InputError(f"{path}: {len(values)} timestamps for {count} images (need one per image)")
+    raw = np.asarray([float(v) for v in values], dtype=np.float64)
+    if not np.all(np.isfinite(raw)) or np.any(np.diff(raw) <= 0):
         raise InputError(f"{path}: timestamps must be finite and strictly increasing")
+    unit, divisor = TIME_UNITS[0]
+    if count > 1:
+        interval = float(np.median(np.diff(raw)))
+        fitting = [(name, div) for name, div in TIME_UNITS
+                   if MIN_FRAME_INTERVAL_S <= interval / div <= MAX_FRAME_INTERVAL_S]
+        if not fitting:
+            raise InputError(f"{path}: the median interval between timestamps is {interval:.6g}, which is no "
+                             f"frame rate of 1 to 1000 fps in seconds, ms, us or ns (frame intervals 1 ms to 1 s)")
+        unit, divisor = fitting[0]
+    times = np.asarray([v / divisor for v in values], dtype=np.float64)
+    if np.max(np.abs(times)) > MAX_ABS_TIME_S or np.any(np.diff(times) <= 0):
+        raise InputError(f"{path}: timestamps up to {np.max(np.abs(times)):.6g} s cannot be told apart "
+                         f"(at most {MAX_ABS_TIME_S:g} s)")
+    if divisor != 1 and notes is not None:
+        notes.append(f"{path}: the timestamps are in {unit} (a frame every {np.median(np.diff(times)) * 1e3:.4g} ms); "
+                     "converted to seconds")
     return times
 
 
@@ -214,7 +246,9 @@ def _folder(folder: Path) -> FrameSource:
         raise InputError(f"{folder}: no images ({', '.join(IMAGE_EXTENSIONS)}) in the folder")
     stamps = folder / TIMESTAMPS_FILE
     if stamps.is_file():
-        return FrameSource("images", images, "timestamps file", len(images), None, read_timestamps(stamps, len(images)))
+        notes: list = []
+        times = read_timestamps(stamps, len(images), notes)
+        return FrameSource("images", images, "timestamps file", len(images), None, times, notes)
     return FrameSource("images", images, "frame index", len(images), None, np.arange(len(images), dtype=np.float64))
 
 

@@ -18,6 +18,8 @@ from .pnp import FramePoses, per_frame_pnp
 # The line delay counts as determined when its standard deviation is below this fraction
 # of the nominal full-frame delay 1 / (fps * rows) (a readout-time error of 5 % of a frame).
 UNDETERMINED_STD_FRACTION = 0.05
+# A detection noise the user may give: finer than any detector to a tenth of a typical target cell.
+PIXEL_SIGMA_RANGE_PX = (1e-4, 100.0)
 
 
 def check_inputs(observations: Observations, camera: CameraModel, rows: Optional[int]):
@@ -35,6 +37,30 @@ def check_inputs(observations: Observations, camera: CameraModel, rows: Optional
     if observations.num_frames < 4 or observations.num_observations < 24:
         raise InputError("too few observations: need at least 4 frames with target points")
     return rows
+
+
+# Uniform knot segments at most per frame: finer segments are not determined by the detections
+# (the motion prior alone sets them) and only cost time (5000 segments of a 45-frame video: 3 min).
+MAX_SEGMENTS_PER_FRAME = 4
+
+
+def check_segment_count(num_segments: Optional[int], frames: int) -> None:
+    """InputError when a fixed number of uniform segments is not 1..MAX_SEGMENTS_PER_FRAME per frame."""
+    if num_segments is None:
+        return
+    most = MAX_SEGMENTS_PER_FRAME * frames
+    if not 1 <= int(num_segments) <= most:
+        raise InputError(f"uniform knots: {num_segments} segments for {frames} frames; give 1 to {most} "
+                         f"(at most {MAX_SEGMENTS_PER_FRAME} a frame)")
+
+
+def require_frame_times(timestamps_source: str, source) -> None:
+    """InputError when the frames have no times (an image folder without timestamps.txt, a video
+    with neither frame times nor a frame rate): the line delay and the trajectory are measured in
+    time, and index-as-seconds would scale them (1 s per frame: 30x the line delay at 30 fps)."""
+    if timestamps_source == "frame index":
+        raise InputError(f"{source}: the frames have no times: put timestamps.txt in the image folder (one time "
+                         "per image, in file-name order, in seconds), or give a video with frame times")
 
 
 def initial_values(observations: Observations, camera: CameraModel, rows: Optional[int],
@@ -68,8 +94,9 @@ def choose_pixel_sigma(used: Observations, pixel_sigma: Optional[float]) -> tupl
     """The detection noise σ (px) and where it came from: the user's, else estimated from the
     target grid (rscalib.linedelay.noise), else 0.5 px to be replaced by the residual RMS ("residuals")."""
     if pixel_sigma is not None:
-        if not pixel_sigma > 0:
-            raise InputError("pixel_sigma must be positive")
+        low, high = PIXEL_SIGMA_RANGE_PX
+        if not low <= pixel_sigma <= high:  # 1e-300 px would claim a line delay known to 1e-300
+            raise InputError(f"pixel_sigma must be in [{low:g}, {high:g}] px, not {pixel_sigma:g}")
         return float(pixel_sigma), "user"
     sigma = estimate_pixel_sigma(used)
     if sigma is None:

@@ -28,8 +28,15 @@ from ..detection.result import DetectionResult
 from ..errors import InputError
 from ..io.cameras import load_camera
 from ..io.targets import Target, load_target
+from ..io.video import open_source
 from . import selfcheck
-from .common import UNDETERMINED_STD_FRACTION, IntrinsicsPrior, frame_rate_hz, load_intrinsics_prior
+from .common import (
+    UNDETERMINED_STD_FRACTION,
+    IntrinsicsPrior,
+    frame_rate_hz,
+    load_intrinsics_prior,
+    require_frame_times,
+)
 from .guidance import capture_guidance
 from .linear import LinearInterpResult, calibrate_line_delay_linear
 from .pnp import PnpTrajectory, compare_with_pnp, pnp_trajectory
@@ -278,7 +285,9 @@ def check_target_matches(video: PathLike, target: Target, detection: DetectionRe
 
 def _detections(video, target, camera: CameraModel, workers, cache, cache_dir, progress,
                 on_detection: DetectionCallback) -> DetectionResult:
+    require_frame_times(open_source(video).timestamps_source, video)  # before the slow detection
     detection = detect(video, target, camera, workers=workers, cache=cache, cache_dir=cache_dir, progress=progress)
+    require_frame_times(detection.timestamps, video)  # a video without times or frame rate
     if on_detection is not None:
         on_detection(detection)
     return detection

@@ -22,6 +22,7 @@ from . import noise
 from .common import (
     IntrinsicsPrior,
     assess_noise_and_determinacy,
+    check_segment_count,
     choose_pixel_sigma,
     default_intrinsics_prior,
     initial_values,
@@ -257,6 +258,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     if initial_segments_per_s is None:
         # One segment per 4 frames (at least 7.5 per second): too few for hand-held motion on purpose.
         initial_segments_per_s = max(fps / 4.0, 7.5)
+    check_segment_count(num_segments, used.num_frames)
     segments = int(num_segments) if num_segments else max(1, int(math.ceil(duration * initial_segments_per_s)))
     trajectory = initial_trajectory(used, used_poses, d, segments, t_begin, t_end)
 

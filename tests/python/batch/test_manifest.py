@@ -52,7 +52,7 @@ def test_yaml_with_defaults_lists_and_flags(tmp_path):
     ("command,input\nlinedelays,a.avi\n", "row 1 (line 2): field 'command': 'linedelays' is not one of"),
     ("command,input\nflicker,\n", "row 1 (line 2): field 'input': missing"),
     ("command,input,frequency,frequncy\nflicker,a.avi,1,2\n", "field 'frequncy': unrecognized arguments: --frequncy 2"),
-    ("command,input,frequency\nflicker,a.avi,fast\n", "field 'frequency': argument --frequency: invalid float"),
+    ("command,input,frequency\nflicker,a.avi,fast\n", "field 'frequency': argument --frequency: not a number"),
     ("command,input\nflicker,a.avi\n", "field 'frequency': the following arguments are required: --frequency"),
     ("command,input,out\nflicker,a.avi,x\n", "field 'out': is set by the batch"),
     ("id,command,input,frequency\nx,flicker,a.avi,1\nx,flicker,b.avi,1\n", "row 2 (line 3): field 'id': 'x' is "

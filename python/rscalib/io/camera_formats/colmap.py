@@ -17,7 +17,7 @@ import numpy as np
 
 from ..._core import CameraModel
 from ...errors import InputError
-from .common import EQUIDISTANT, RADTAN, CameraFile, supported
+from .common import EQUIDISTANT, RADTAN, CameraFile, camera_from_opencv, supported
 
 PIXEL_CENTRE_OFFSET = 0.5   # COLMAP pixel = OpenCV pixel + 0.5
 
@@ -55,7 +55,7 @@ def read_colmap(path: Path, text: str) -> CameraFile:
     count, model, layout = COLMAP_MODELS[name]
     try:
         values = [float(v) for v in params]
-    except ValueError:
+    except (ValueError, OverflowError):
         raise InputError(f"{path}: camera {camera_id}: the parameters must be numbers") from None
     if len(values) != count:
         raise InputError(f"{path}: camera {camera_id}: {name} needs {count} parameters, has {len(values)}")
@@ -65,10 +65,13 @@ def read_colmap(path: Path, text: str) -> CameraFile:
     fx, fy, cx, cy, *dist = layout(values)
     size = 5 if model == RADTAN else 4
     coeffs = (list(dist) + [0.0] * size)[:size]
-    if not (fx > 0 and fy > 0 and int(width) > 0 and int(height) > 0):
-        raise InputError(f"{path}: camera {camera_id}: focal lengths and size must be positive")
-    params_ours = [fx, fy, cx - PIXEL_CENTRE_OFFSET, cy - PIXEL_CENTRE_OFFSET, *coeffs]
-    return CameraFile(CameraModel(model, params_ours, int(width), int(height)), None, "colmap", notes)
+    k = np.array([[fx, 0, cx - PIXEL_CENTRE_OFFSET], [0, fy, cy - PIXEL_CENTRE_OFFSET], [0, 0, 1.0]])
+    try:
+        camera = camera_from_opencv(k, coeffs, width, height, model, fields=("PARAMS", "PARAMS"),
+                                    size_fields=("WIDTH", "HEIGHT"))
+    except InputError as error:
+        raise InputError(f"{path}: camera {camera_id}: {error}") from None
+    return CameraFile(camera, None, "colmap", notes)
 
 
 def colmap_line(camera: CameraModel, camera_id: int = 1) -> str:

@@ -37,31 +37,91 @@ def opencv_matrices(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     raise InputError(f"{camera.model} has no OpenCV equivalent (use pinhole-radtan or pinhole-equidistant)")
 
 
-def camera_from_opencv(camera_matrix, dist_coeffs, width: int, height: int,
-                       model: str = RADTAN) -> CameraModel:
+# What a camera file may say: image sides up to 100 000 px, focal lengths up to 10^7 px, the
+# principal point within one image size of the image, |line delay| up to 10 ms per row.
+MAX_IMAGE_SIDE_PX = 100_000
+MAX_FOCAL_PX = 1e7
+MAX_ABS_LINE_DELAY_S = 0.01
+
+
+def finite_number(value, field: str) -> float:
+    """A finite number (a string of one too, not true/false), else InputError naming the field."""
+    if isinstance(value, bool):
+        raise InputError(f"{field} must be a number, not {value!r}")
+    try:
+        number = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{field} must be a number, not {str(value)[:40]!r}") from None
+    if not np.isfinite(number):
+        raise InputError(f"{field} must be finite, not {number}")
+    return number
+
+
+def image_side_px(value, field: str) -> int:
+    """A whole number of pixels in 1..MAX_IMAGE_SIDE_PX, else InputError naming the field."""
+    number = finite_number(value, field)
+    if number != int(number) or not 1 <= number <= MAX_IMAGE_SIDE_PX:
+        raise InputError(f"{field} must be a whole number of pixels in 1..{MAX_IMAGE_SIDE_PX}, not {number:g}")
+    return int(number)
+
+
+def line_delay_value(value, field: str) -> Optional[float]:
+    """The line delay (s/row) a file gives, or None when it gives none; InputError naming the field
+    for text, lists, NaN or inf, or more than MAX_ABS_LINE_DELAY_S per row."""
+    if value is None:
+        return None
+    if isinstance(value, (list, tuple, dict)):
+        raise InputError(f"{field} must be a number (s/row), not {value!r}")
+    number = finite_number(value, f"{field} (s/row)")
+    if abs(number) > MAX_ABS_LINE_DELAY_S:
+        raise InputError(f"{field} must be at most {MAX_ABS_LINE_DELAY_S:g} s/row in magnitude, not {number:g}")
+    return number
+
+
+def numeric_array(value, field: str) -> np.ndarray:
+    """float64 array of a list (or nested list) of numbers, else InputError naming the field."""
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{field} must be numbers, not {str(value)[:40]!r}") from None
+    if not np.all(np.isfinite(array)):
+        raise InputError(f"{field} has a non-finite value")
+    return array
+
+
+def camera_from_opencv(camera_matrix, dist_coeffs, width, height, model: str = RADTAN, *,
+                       fields: tuple = ("camera_matrix", "distortion_coefficients"),
+                       size_fields: tuple = ("image_width", "image_height")) -> CameraModel:
     """CameraModel from OpenCV's K and distortion vector (radtan: 4, 5 or 8+ values with
-    zeros beyond k3 only; equidistant: 4 values)."""
-    k = np.asarray(camera_matrix, dtype=np.float64).reshape(3, 3)
-    dist = np.asarray(dist_coeffs, dtype=np.float64).reshape(-1)
+    zeros beyond k3 only; equidistant: 4 values). Every value is checked (type, finite, range);
+    an InputError names the file's field: `fields` (K, distortion) and `size_fields` (width,
+    height) as the file calls them."""
+    k = numeric_array(camera_matrix, fields[0])
+    if k.size != 9:
+        raise InputError(f"{fields[0]} needs 9 values (3x3), has {k.size}")
+    k = k.reshape(3, 3)
+    dist = numeric_array(dist_coeffs, fields[1]).reshape(-1)
+    width, height = image_side_px(width, size_fields[0]), image_side_px(height, size_fields[1])
     if abs(k[0, 1]) > 1e-12 * abs(k[0, 0]):
-        raise InputError("camera matrices with skew are not supported")
-    if not (np.all(np.isfinite(k)) and np.all(np.isfinite(dist))):
-        raise InputError("the camera matrix or distortion has a non-finite value")
-    if not (k[0, 0] > 0 and k[1, 1] > 0):
-        raise InputError(f"the focal lengths must be positive (fx {k[0, 0]:g}, fy {k[1, 1]:g})")
-    if not (int(width) > 0 and int(height) > 0):
-        raise InputError(f"the image size must be positive, not {width}x{height}")
+        raise InputError(f"{fields[0]}: camera matrices with skew are not supported")
+    if not (0 < k[0, 0] <= MAX_FOCAL_PX and 0 < k[1, 1] <= MAX_FOCAL_PX):
+        raise InputError(f"{fields[0]}: the focal lengths must be in (0, {MAX_FOCAL_PX:g}] px "
+                         f"(fx {k[0, 0]:g}, fy {k[1, 1]:g})")
+    if not (-width <= k[0, 2] <= 2 * width and -height <= k[1, 2] <= 2 * height):
+        raise InputError(f"{fields[0]}: the principal point ({k[0, 2]:g}, {k[1, 2]:g}) is far outside the "
+                         f"{width}x{height} image")
     intrinsics = [k[0, 0], k[1, 1], k[0, 2], k[1, 2]]
     if model == RADTAN:
         if dist.size > 5 and np.any(dist[5:] != 0):
-            raise InputError("only OpenCV's k1, k2, p1, p2, k3 are supported (rational/prism terms are not)")
+            raise InputError(f"{fields[1]}: only OpenCV's k1, k2, p1, p2, k3 are supported (rational/prism "
+                             "terms are not)")
         coeffs = np.zeros(5)
         coeffs[:min(dist.size, 5)] = dist[:5]
-        return CameraModel(model, np.r_[intrinsics, coeffs], int(width), int(height))
+        return CameraModel(model, np.r_[intrinsics, coeffs], width, height)
     if model == EQUIDISTANT:
         if dist.size != 4:
-            raise InputError("pinhole-equidistant needs 4 distortion coefficients k1..k4")
-        return CameraModel(model, np.r_[intrinsics, dist], int(width), int(height))
+            raise InputError(f"{fields[1]}: pinhole-equidistant needs 4 distortion coefficients k1..k4")
+        return CameraModel(model, np.r_[intrinsics, dist], width, height)
     raise InputError(f"unknown camera model {model!r}")
 
 

@@ -16,12 +16,21 @@ import time
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
-
 from ..._core import CameraModel
 from ..._version import __version__
 from ...errors import InputError
-from .common import EQUIDISTANT, RADTAN, CameraFile, camera_from_opencv, image_lines, opencv_matrices
+from .common import (
+    EQUIDISTANT,
+    RADTAN,
+    CameraFile,
+    camera_from_opencv,
+    finite_number,
+    image_lines,
+    image_side_px,
+    line_delay_value,
+    numeric_array,
+    opencv_matrices,
+)
 
 READOUT_DIRECTIONS = ("TopToBottom", "BottomToTop", "LeftToRight", "RightToLeft")
 
@@ -80,26 +89,32 @@ def read_gyroflow(path: Path, data: dict) -> CameraFile:
     the line delay from frame_readout_time when it is given."""
     model_name = data.get("distortion_model") or "opencv_fisheye"
     models = {"opencv_fisheye": EQUIDISTANT, "opencv_standard": RADTAN}
-    if model_name not in models:
+    if not isinstance(model_name, str) or model_name not in models:
         raise InputError(f"{path}: Gyroflow distortion_model '{model_name}' is not supported; supported: "
                          "opencv_fisheye or opencv_standard")
-    params = data["fisheye_params"]
-    try:
-        k = np.asarray(params["camera_matrix"], dtype=np.float64).reshape(3, 3)
-        dist = np.asarray(params["distortion_coeffs"], dtype=np.float64).ravel()
-        width, height = int(data["calib_dimension"]["w"]), int(data["calib_dimension"]["h"])
-    except (KeyError, TypeError, ValueError):
+    params, size = data["fisheye_params"], data["calib_dimension"]
+    if not isinstance(size, dict) or "camera_matrix" not in params or "distortion_coeffs" not in params:
         raise InputError(f"{path}: fisheye_params (camera_matrix, distortion_coeffs) and calib_dimension "
-                         "are needed") from None
-    if not data.get("asymmetrical", False):
-        k[0, 2], k[1, 2] = width / 2.0, height / 2.0   # what Gyroflow does with a symmetrical profile
+                         "{w, h} are needed")
     try:
-        camera = camera_from_opencv(k, dist, width, height, models[model_name])
+        k = numeric_array(params["camera_matrix"], "fisheye_params.camera_matrix")
+        if k.size != 9:
+            raise InputError(f"fisheye_params.camera_matrix needs 9 values (3x3), has {k.size}")
+        k = k.reshape(3, 3)
+        width = image_side_px(size.get("w"), "calib_dimension.w")
+        height = image_side_px(size.get("h"), "calib_dimension.h")
+        if not data.get("asymmetrical", False):
+            k[0, 2], k[1, 2] = width / 2.0, height / 2.0   # what Gyroflow does with a symmetrical profile
+        camera = camera_from_opencv(k, params["distortion_coeffs"], width, height, models[model_name],
+                                    fields=("fisheye_params.camera_matrix", "fisheye_params.distortion_coeffs"),
+                                    size_fields=("calib_dimension.w", "calib_dimension.h"))
+        readout_ms = data.get("frame_readout_time")
+        line_delay = None
+        if readout_ms is not None and readout_ms != 0:
+            direction = data.get("frame_readout_direction")
+            line_delay = line_delay_value(finite_number(readout_ms, "frame_readout_time (ms)") * 1e-3 / image_lines(camera, direction),
+                                          "frame_readout_time / image lines")
     except InputError as error:
         raise InputError(f"{path}: {error}") from None
-    readout_ms = data.get("frame_readout_time")
-    line_delay = None
-    if isinstance(readout_ms, (int, float)) and readout_ms:
-        direction = data.get("frame_readout_direction")
-        line_delay = float(readout_ms) * 1e-3 / image_lines(camera, direction)
     return CameraFile(camera, line_delay, "gyroflow")
+

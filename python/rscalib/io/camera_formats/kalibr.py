@@ -21,7 +21,7 @@ import yaml
 
 from ..._core import CameraModel
 from ...errors import InputError
-from .common import EQUIDISTANT, RADTAN, CameraFile, camera_from_opencv, supported
+from .common import EQUIDISTANT, RADTAN, CameraFile, camera_from_opencv, line_delay_value, supported
 
 KALIBR_MODELS = ("pinhole",)
 KALIBR_DISTORTIONS = ("radtan", "equidistant", "none")
@@ -31,40 +31,40 @@ REFIT_GRID = (41, 31)   # pixels sampled over the image for the k3 refit
 
 
 def is_kalibr(data) -> bool:
-    return isinstance(data, dict) and isinstance(data.get("cam0"), dict)
+    return isinstance(data, dict) and "cam0" in data
 
 
 def read_kalibr(path: Path, data: dict) -> CameraFile:
     cam = data["cam0"]
+    if not isinstance(cam, dict):
+        raise InputError(f"{path}: cam0 must be a mapping of Kalibr's fields (camera_model, intrinsics, "
+                         f"distortion_model, distortion_coeffs, resolution), not {str(cam)[:40]!r}")
     notes = []
-    others = sorted(k for k in data if str(k).startswith("cam") and k != "cam0")
+    others = sorted(str(k) for k in data if str(k).startswith("cam") and k != "cam0")
     if others:
         notes.append(f"{path}: the camchain has {len(others) + 1} cameras; cam0 is used")
-    model = str(cam.get("camera_model", "pinhole"))
+    model = cam.get("camera_model", "pinhole")
     if model not in KALIBR_MODELS:
-        what = f" ({KNOWN_UNSUPPORTED[model]})" if model in KNOWN_UNSUPPORTED else ""
+        what = f" ({KNOWN_UNSUPPORTED[model]})" if isinstance(model, str) and model in KNOWN_UNSUPPORTED else ""
         raise InputError(f"{path}: cam0 camera_model '{model}'{what} is not supported; supported: camera_model "
                          f"pinhole with distortion_model {supported(KALIBR_DISTORTIONS)}")
-    distortion = str(cam.get("distortion_model", "radtan"))
+    distortion = cam.get("distortion_model", "radtan")
     if distortion not in KALIBR_DISTORTIONS:
         raise InputError(f"{path}: cam0 distortion_model '{distortion}' is not supported; supported: "
                          f"{supported(KALIBR_DISTORTIONS)}")
     intrinsics = _numbers(path, cam, "intrinsics", 4)
-    coeffs = [] if distortion == "none" else _numbers(path, cam, "distortion_coeffs",
-                                                      4 if distortion in ("radtan", "equidistant") else None)
-    width, height = (int(v) for v in _numbers(path, cam, "resolution", 2))
+    coeffs = [] if distortion == "none" else _numbers(path, cam, "distortion_coeffs", 4)
+    width, height = _numbers(path, cam, "resolution", 2)
     fx, fy, cx, cy = intrinsics
     k = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
     try:
         camera = camera_from_opencv(k, coeffs or [0, 0, 0, 0], width, height,
-                                    EQUIDISTANT if distortion == "equidistant" else RADTAN)
+                                    EQUIDISTANT if distortion == "equidistant" else RADTAN,
+                                    fields=("intrinsics", "distortion_coeffs"),
+                                    size_fields=("resolution (width)", "resolution (height)"))
+        line_delay = line_delay_value(cam.get("line_delay"), "line_delay")
     except InputError as error:
-        raise InputError(f"{path}: cam0: {error}") from None
-    line_delay = cam.get("line_delay")
-    try:
-        line_delay = None if line_delay is None else float(line_delay)
-    except (TypeError, ValueError):
-        raise InputError(f"{path}: cam0 line_delay must be a number (s/row), not {line_delay!r}") from None
+        raise InputError(f"{path}: cam0 {error}") from None
     return CameraFile(camera, line_delay, "kalibr", notes)
 
 
@@ -74,8 +74,8 @@ def _numbers(path: Path, cam: dict, key: str, count: Optional[int]) -> list:
         raise InputError(f"{path}: cam0 has no field '{key}'")
     try:
         numbers = [float(v) for v in value]
-    except (TypeError, ValueError):
-        raise InputError(f"{path}: cam0 {key} must be a list of numbers, not {value!r}") from None
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{path}: cam0 {key} must be a list of numbers, not {str(value)[:40]!r}") from None
     if count is not None and len(numbers) != count:
         raise InputError(f"{path}: cam0 {key} needs {count} values, has {len(numbers)}")
     return numbers

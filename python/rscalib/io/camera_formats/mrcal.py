@@ -24,7 +24,7 @@ import numpy as np
 from ..._core import CameraModel
 from ..._version import __version__
 from ...errors import InputError
-from .common import RADTAN, CameraFile, supported
+from .common import RADTAN, CameraFile, camera_from_opencv, numeric_array, supported
 
 # lensmodel -> number of distortion values after fx fy cx cy
 MRCAL_READ_MODELS = {"LENSMODEL_PINHOLE": 0, "LENSMODEL_OPENCV4": 4, "LENSMODEL_OPENCV5": 5,
@@ -48,29 +48,34 @@ def read_mrcal(path: Path, text: str) -> CameraFile:
         raise InputError(f"{path}: not an mrcal .cameramodel (a Python dict literal)") from None
     if not isinstance(data, dict):
         raise InputError(f"{path}: not an mrcal .cameramodel (a Python dict literal)")
-    model = str(data.get("lensmodel", data.get("distortion_model", ""))).replace("DISTORTION", "LENSMODEL")
+    model = data.get("lensmodel", data.get("distortion_model", ""))
+    model = model.replace("DISTORTION", "LENSMODEL") if isinstance(model, str) else model
     if model not in MRCAL_READ_MODELS:
         raise InputError(f"{path}: lensmodel '{model}' is not supported; supported: {supported(MRCAL_READ_MODELS)}")
+    if "intrinsics" not in data or "imagersize" not in data:
+        raise InputError(f"{path}: fields intrinsics and imagersize [w, h] are needed")
     try:
-        intrinsics = np.asarray([float(v) for v in data["intrinsics"]], dtype=np.float64)
-        width, height = (int(v) for v in data["imagersize"])
-    except (KeyError, TypeError, ValueError):
-        raise InputError(f"{path}: fields intrinsics and imagersize [w, h] are needed") from None
-    count = 4 + MRCAL_READ_MODELS[model]
-    if intrinsics.size != count:
-        raise InputError(f"{path}: {model} needs {count} intrinsics, has {intrinsics.size}")
-    dist = np.zeros(5)
-    dist[:min(5, count - 4)] = intrinsics[4:9]
-    if count > 9 and np.any(intrinsics[9:] != 0):
-        raise InputError(f"{path}: {model} with k4, k5, k6 != 0 is not supported (rscalib's pinhole-radtan has "
-                         "k1 k2 p1 p2 k3)")
-    fx, fy, cx, cy = intrinsics[:4]
-    if not (fx > 0 and fy > 0 and width > 0 and height > 0):
-        raise InputError(f"{path}: intrinsics and imagersize must be positive")
-    camera = CameraModel(RADTAN, np.r_[intrinsics[:4], dist], width, height)
+        intrinsics = numeric_array(data["intrinsics"], "intrinsics").reshape(-1)
+        size = numeric_array(data["imagersize"], "imagersize").reshape(-1)
+        if size.size != 2:
+            raise InputError(f"imagersize needs 2 values [w, h], has {size.size}")
+        count = 4 + MRCAL_READ_MODELS[model]
+        if intrinsics.size != count:
+            raise InputError(f"{model} needs {count} intrinsics, has {intrinsics.size}")
+        dist = np.zeros(5)
+        dist[:min(5, count - 4)] = intrinsics[4:9]
+        if count > 9 and np.any(intrinsics[9:] != 0):
+            raise InputError(f"{model} with k4, k5, k6 != 0 is not supported (rscalib's pinhole-radtan has "
+                             "k1 k2 p1 p2 k3)")
+        fx, fy, cx, cy = intrinsics[:4]
+        k = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
+        camera = camera_from_opencv(k, dist, size[0], size[1], RADTAN, fields=("intrinsics", "intrinsics"),
+                                    size_fields=("imagersize (w)", "imagersize (h)"))
+    except InputError as error:
+        raise InputError(f"{path}: {error}") from None
     notes = []
     extrinsics = data.get("extrinsics")
-    if extrinsics is not None and np.any(np.asarray(extrinsics, dtype=float) != 0):
+    if extrinsics is not None and np.any(numeric_array(extrinsics, f"{path}: extrinsics") != 0):
         notes.append(f"{path}: the extrinsics (rt_cam_ref) are not used")
     return CameraFile(camera, None, "mrcal", notes)
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..._core import CameraModel
 from ...errors import InputError
-from .common import EQUIDISTANT, RADTAN, CameraFile, camera_from_opencv, image_lines, opencv_matrices
+from .common import EQUIDISTANT, RADTAN, CameraFile, camera_from_opencv, image_lines, line_delay_value, opencv_matrices
 
 FISHEYE_PREFIX = "fisheye_"
 # `distortion_model` values of older rscalib files and other tools that mean the fisheye model
@@ -31,12 +31,36 @@ def _node_string(storage, key: str) -> str:
     return node.string() if not node.empty() and node.isString() else ""
 
 
+def _node_number(storage, key: str):
+    """The number under `key` (None if absent); InputError naming the key for a string or a list."""
+    node = storage.getNode(key)
+    if node.empty() or node.isNone():
+        return None
+    if not (node.isInt() or node.isReal()):
+        raise InputError(f"field {key} must be a number")
+    return node.real()
+
+
+def _node_matrix(storage, key: str) -> Optional[np.ndarray]:
+    """The !!opencv-matrix under `key` (None if absent); InputError naming the key if unreadable."""
+    node = storage.getNode(key)
+    if node.empty() or node.isNone():
+        return None
+    try:
+        matrix = node.mat()
+    except cv2.error:
+        matrix = None
+    if matrix is None:
+        raise InputError(f"field {key} must be an !!opencv-matrix of numbers (rows, cols, dt, data)")
+    return matrix
+
+
 def read_opencv(path: Path) -> CameraFile:
     try:
         storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error:
-        raise InputError(f"{path}: not a camera file rscalib reads (OpenCV FileStorage, Kalibr camchain, "
-                         "ROS camera_info, mrcal .cameramodel, COLMAP cameras.txt)") from None
+    except (cv2.error, SystemError):  # a syntax error: OpenCV's parser raises through its constructor
+        raise InputError(f"{path}: not a camera file rscalib reads (OpenCV FileStorage with a syntax error, or "
+                         "none of Kalibr camchain, ROS camera_info, mrcal .cameramodel, COLMAP cameras.txt)") from None
     try:
         if not storage.isOpened():
             raise InputError(f"{path}: not an OpenCV FileStorage file")
@@ -44,17 +68,18 @@ def read_opencv(path: Path) -> CameraFile:
         legacy = _node_string(storage, "distortion_model")
         fisheye_keys = not storage.getNode(FISHEYE_PREFIX + "camera_matrix").empty()
         prefix = FISHEYE_PREFIX if fisheye_keys else ""
-        k = storage.getNode(prefix + "camera_matrix").mat()
-        dist = storage.getNode(prefix + "distortion_coefficients").mat()
-        width = storage.getNode("image_width").real()
-        height = storage.getNode("image_height").real()
-        line_delay_node = storage.getNode("line_delay_s")
-        line_delay = None if line_delay_node.empty() else float(line_delay_node.real())
+        k = _node_matrix(storage, prefix + "camera_matrix")
+        dist = _node_matrix(storage, prefix + "distortion_coefficients")
+        width = _node_number(storage, "image_width")
+        height = _node_number(storage, "image_height")
+        line_delay = line_delay_value(_node_number(storage, "line_delay_s"), "field line_delay_s")
+    except InputError as error:
+        raise InputError(f"{path}: {error}") from None
     finally:
         storage.release()
-    if k is None or k.shape != (3, 3):
-        raise InputError(f"{path}: field camera_matrix (3x3 !!opencv-matrix) is missing")
-    if not width or not height:
+    if k is None:
+        raise InputError(f"{path}: field {prefix}camera_matrix (3x3 !!opencv-matrix) is missing")
+    if width is None or height is None:
         raise InputError(f"{path}: fields image_width and image_height are missing")
     if model and model not in (RADTAN, EQUIDISTANT):
         raise InputError(f"{path}: camera_model '{model}' is not supported ({RADTAN} or {EQUIDISTANT})")
@@ -62,7 +87,8 @@ def read_opencv(path: Path) -> CameraFile:
         model = EQUIDISTANT if fisheye_keys or legacy in _EQUIDISTANT_NAMES else RADTAN
     dist = np.zeros(5) if dist is None else dist.ravel()
     try:
-        camera = camera_from_opencv(k, dist, int(width), int(height), model)
+        camera = camera_from_opencv(k, dist, width, height, model,
+                                    fields=(prefix + "camera_matrix", prefix + "distortion_coefficients"))
     except InputError as error:
         raise InputError(f"{path}: {error}") from None
     return CameraFile(camera, line_delay, "opencv")

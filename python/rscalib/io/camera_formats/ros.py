@@ -30,7 +30,7 @@ def _matrix(path: Path, data: dict, key: str, shape: tuple) -> np.ndarray:
         raise InputError(f"{path}: field {key} (rows, cols, data) is missing")
     try:
         values = np.asarray([float(v) for v in node["data"]], dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"{path}: {key}.data must be a list of numbers") from None
     if shape and values.size != shape[0] * shape[1]:
         raise InputError(f"{path}: {key} needs {shape[0] * shape[1]} values, has {values.size}")
@@ -38,15 +38,14 @@ def _matrix(path: Path, data: dict, key: str, shape: tuple) -> np.ndarray:
 
 
 def read_ros(path: Path, data: dict) -> CameraFile:
-    name = str(data.get("distortion_model", "plumb_bob"))
-    if name not in ROS_MODELS:
+    name = data.get("distortion_model", "plumb_bob")
+    if not isinstance(name, str) or name not in ROS_MODELS:
         raise InputError(f"{path}: distortion_model '{name}' is not supported; supported: {supported(ROS_MODELS)}")
     k = _matrix(path, data, "camera_matrix", (3, 3))
     dist = _matrix(path, data, "distortion_coefficients", ()) if "distortion_coefficients" in data else np.zeros(5)
-    try:
-        width, height = int(data["image_width"]), int(data["image_height"])
-    except (KeyError, TypeError, ValueError):
-        raise InputError(f"{path}: fields image_width and image_height are missing") from None
+    if "image_width" not in data or "image_height" not in data:
+        raise InputError(f"{path}: fields image_width and image_height are missing")
+    width, height = data["image_width"], data["image_height"]
     if name == "equidistant" and dist.size != 4:
         raise InputError(f"{path}: distortion_model equidistant needs 4 coefficients k1..k4, has {dist.size}")
     if name == "rational_polynomial" and np.any(dist[5:] != 0):
