@@ -67,8 +67,8 @@ def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out")
     absolute = Path(os.path.abspath(out))
     if os.path.lexists(absolute) and not absolute.is_dir():
         kind = ("a file" if absolute.is_file() else "a link to nothing" if not absolute.exists()
-                else "not a folder (a device or special file)")
-        raise InputError(f"{option} {out}: exists and is {kind}; give a folder")
+                else "a device or special file")
+        raise InputError(f"{option} {out}: exists and is {kind}, not a folder")
     resolved = absolute.resolve()
     fs_type = _mount_type(resolved)
     if fs_type in _PSEUDO_FILESYSTEMS:
