@@ -21,10 +21,10 @@ from pathlib import Path
 from typing import Iterator, Optional
 
 from ..errors import InputError
+from .results import RESULT_FILE  # the marker of a complete set
 
 MANIFEST = ".rscalib-outputs.json"
 STAGING_PREFIX = ".rscalib-staging-"
-RESULT_FILE = "result.json"   # the marker of a complete set (io.results writes it)
 MB = 1 << 20
 
 # file systems that hold no results (kernel views, devices)
