@@ -21,10 +21,10 @@ from pathlib import Path
 from typing import Iterator, Optional
 
 from ..errors import InputError
+from .results import RESULT_FILE  # the marker of a complete set
 
 MANIFEST = ".rscalib-outputs.json"
 STAGING_PREFIX = ".rscalib-staging-"
-RESULT_FILE = "result.json"   # the marker of a complete set (io.results writes it)
 MB = 1 << 20
 
 # file systems that hold no results (kernel views, devices)
@@ -67,8 +67,8 @@ def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out")
     absolute = Path(os.path.abspath(out))
     if os.path.lexists(absolute) and not absolute.is_dir():
         kind = ("a file" if absolute.is_file() else "a link to nothing" if not absolute.exists()
-                else "not a folder (a device or special file)")
-        raise InputError(f"{option} {out}: exists and is {kind}; give a folder")
+                else "a device or special file")
+        raise InputError(f"{option} {out}: exists and is {kind}, not a folder")
     resolved = absolute.resolve()
     fs_type = _mount_type(resolved)
     if fs_type in _PSEUDO_FILESYSTEMS:

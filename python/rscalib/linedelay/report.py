@@ -12,6 +12,9 @@ middle of the image's readout, t + image_readout_time_s / 2.
 - `rscalib localize --model rs-spline`: write_localize_outputs -- result.json, trajectory.csv/.png, TUM;
 - `rscalib localize --model gs-pnp`: write_pnp_outputs -- result.json, trajectory.csv, TUM;
 - a video run of linedelay/pipeline.py: write_video_outputs picks the one of its model.
+
+Each writer writes its files as one set (io.output_folder.output_set): staged, then renamed into
+place with result.json last, replacing the previous run's files in that folder.
 """
 from __future__ import annotations
 
