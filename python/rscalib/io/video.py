@@ -73,7 +73,11 @@ class FrameSource:
     def _images(self, gray: bool) -> Iterator[Frame]:
         flag = cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR
         for index, path in enumerate(self.paths):
-            image = cv2.imread(str(path), flag)
+            try:
+                image = cv2.imread(str(path), flag)
+            except cv2.error as error:   # e.g. over OpenCV's 2**30-pixel limit: raised, not None
+                raise InputError(f"{path}: OpenCV cannot decode this image "
+                                 f"({str(error).strip().splitlines()[-1]})") from None
             yield Frame(index, float(self.times_s[index]), image, Path(path).name,
                         None if image is not None else "unreadable")
 

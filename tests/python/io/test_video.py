@@ -227,3 +227,22 @@ def test_corrupt_video_gives_our_error_and_no_backend_noise(tmp_path):
     result = subprocess.run([sys.executable, "-c", code, str(truncated)], capture_output=True, text=True, timeout=60)
     assert result.stdout.startswith("InputError") and "cannot open as a video" in result.stdout
     assert result.stderr == ""
+
+
+def _header_only_png(width: int, height: int) -> bytes:
+    """A PNG whose header declares width x height (no pixel data): enough for a decoder's size check."""
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(b"")) + chunk(b"IEND", b""))
+
+
+def test_image_over_opencvs_pixel_limit_is_an_input_error_naming_the_file(tmp_path):
+    # cv2.imread raises (not returns None) above 2**30 pixels
+    path = tmp_path / "huge.png"
+    path.write_bytes(_header_only_png(40000, 40000))
+    with pytest.raises(InputError, match="huge.png"):
+        list(open_source([path]).frames())
