@@ -84,8 +84,10 @@ def read_row_profiles(frames: Any, timestamps_s: Optional[Sequence[float]] = Non
         return _profiles(iter((i, None, img) for i, img in enumerate(stack)), len(stack), timestamps_s,
                          roi, max_frames, progress, "given" if timestamps_s is not None else "none")
 
+    from ..io.limits import check_source_memory
     from ..io.video import FrameSource, open_source
     source = frames if isinstance(frames, FrameSource) else open_source(frames)
+    check_source_memory(source)   # frame sizes from the headers: refuse before decoding a frame too big
     times_known = source.timestamps_source != "frame index"
 
     def items():

@@ -185,3 +185,19 @@ def test_cli_no_flicker_exit_3_with_results(tmp_path, capsys):
     result = json.loads((out / "result.json").read_text())
     assert result["determined"] is False
     assert any("do not determine" in w and "no flicker" in w for w in result["warnings"])
+
+
+def test_frames_too_big_for_memory_are_refused_before_decoding(tmp_path):
+    # a header-only PNG of 60000 x 60000 px (over 10 GB to decode): refused from its header
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    path = tmp_path / "huge.png"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 60000, 60000, 8, 0, 0, 0, 0))
+                     + chunk(b"IDAT", zlib.compress(b"")) + chunk(b"IEND", b""))
+    from rscalib.flicker.profiles import read_row_profiles
+    with pytest.raises(InputError, match="huge.png.*memory"):
+        read_row_profiles([path])
