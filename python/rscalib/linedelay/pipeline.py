@@ -45,6 +45,7 @@ from .spline import LineDelayResult, RoundRecord, calibrate_line_delay, localize
 
 TRAJECTORY_MODELS = ("spline", "linear")    # calibrate_video: `rscalib linedelay --trajectory`
 LOCALIZE_MODELS = ("rs-spline", "gs-pnp")   # localize_video: `rscalib localize --model`
+PROBE_FIRST_DETECTED = 150   # detected frames the target-mismatch probe samples from
 
 PathLike = Union[str, Path]
 DetectionCallback = Optional[Callable[[DetectionResult], None]]
@@ -266,8 +267,10 @@ def check_target_matches(video: PathLike, target: Target, detection: DetectionRe
         return
     rows, cols = target.grid_shape
     few = detection.frames_detected < 0.5 * detection.frames_total
+    # the board is the same in every frame: sample the first detected ones, so the probe decodes a
+    # few seconds of video rather than all of it (it decodes up to its last sample)
     numbers = (np.arange(detection.frames_total) if few or detection.frames_detected == 0
-               else detection.frame_numbers)
+               else detection.frame_numbers[:PROBE_FIRST_DETECTED])
     try:
         frames = probe.sample_frames(video, numbers, limit=4 if few else 3)
     except (InputError, OSError):
