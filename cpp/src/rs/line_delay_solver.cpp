@@ -12,6 +12,7 @@
 #include "rscalib/core/error.hpp"
 #include "rscalib/rs/intrinsics_prior_cost.hpp"
 #include "rscalib/rs/motion_prior_cost.hpp"
+#include "rscalib/rs/rs_reprojection_analytic_cost.hpp"
 #include "rscalib/rs/rs_reprojection_cost.hpp"
 #include "rscalib/rs/rs_reprojection_intrinsics_cost.hpp"
 #include "solver_common.hpp"
@@ -256,9 +257,13 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
             loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s, intrinsics->value.data());
         continue;
       }
-      problem->AddResidualBlock(RsReprojectionCost::Create(basis, cam, frame_offset_s, uv, point_w,
-                                                           a.error.sqrt_information),
-                                loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s);
+      ceres::CostFunction* cost =
+          options.analytic_jacobian
+              ? new RsReprojectionAnalyticCost(basis, cam, frame_offset_s, uv, point_w,
+                                               a.error.sqrt_information)
+              : RsReprojectionCost::Create(basis, cam, frame_offset_s, uv, point_w,
+                                           a.error.sqrt_information);
+      problem->AddResidualBlock(cost, loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s);
     }
     if (options.use_motion_prior) {
       for (int span = spline::kSplineDegree; span < trajectory->num_control_points(); ++span) {
@@ -273,6 +278,7 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
       detail::MakeSolveSettings(options, true, "the line-delay solve failed: ");
   if (intrinsics)
     settings.joint_covariance_blocks = {{intrinsics->value.data(), kIntrinsicsBlockSize}};
+  settings.schur_variance = options.schur_variance && !intrinsics;
   const detail::SolveResult result =
       detail::SolveWithCovariance(settings, line_delay_s, started, reattach, add_residuals);
   result.CopyTo(&summary);
