@@ -299,13 +299,13 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     history: list[RoundRecord] = []
     adapted = not adaptive_knots
     summary = None
-    # Rounds are solved loosely, except the final one: tight, with sigma_d. A round is final when the
-    # round before split few segments (those rarely split again; if the final round still splits
+    # Rounds are solved loosely, except the final one: tight, then sigma_d alone. A round is final when
+    # the round before split few segments (those rarely split again; if the final round still splits
     # some, another round follows). Otherwise a polish on the final knots ends the solve.
     final = False
     for round_index in range(max(1, max_rounds)):
         last_chance = round_index == max_rounds - 1
-        _set_tolerance(options, final=final, covariance=final and estimate)
+        _set_tolerance(options, final=final, covariance=False)
         summary = _core.solve_line_delay(*args, trajectory, d, options)
         d = summary.line_delay_s
         if refine_intrinsics:  # the next round starts from the refined camera
@@ -344,7 +344,13 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         warnings.append(f"knot adaptation stopped at the round cap ({max_rounds}) with segments still "
                         "above their expected cost")
 
-    if not (final and adapted):
+    if final and adapted:
+        if estimate:  # sigma_d at the final estimate: only the covariance, nothing moves
+            _set_tolerance(options, final=True, covariance=True)
+            options.max_iterations = 0
+            summary = _core.solve_line_delay(*args, trajectory, d, options)
+            history[-1].solve_time_s += summary.solve_time_s
+    else:
         # Final polish at tight tolerance on the final knots, with the covariance of d.
         _set_tolerance(options, final=True, covariance=estimate)
         summary = _core.solve_line_delay(*args, trajectory, d, options)
