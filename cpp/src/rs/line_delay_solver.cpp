@@ -241,6 +241,19 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
   };
   const auto add_residuals = [&](ceres::Problem* problem, ceres::LossFunction* loss) {
     if (intrinsics) intrinsics->AddTo(problem);
+    // Plain least squares with the analytic Jacobian: one residual block per run of observations
+    // with the same frame time and span (RsReprojectionGroupCost), the same sum of squares.
+    const bool group = options.analytic_jacobian && !loss && !intrinsics;
+    std::vector<AnalyticReprojectionTerm> members;
+    const auto flush_group = [&](int span) {
+      if (members.empty()) return;
+      double* c0 = control + 6 * (span - 3);
+      problem->AddResidualBlock(new RsReprojectionGroupCost(std::move(members)), nullptr, c0,
+                                c0 + 6, c0 + 12, c0 + 18, line_delay_s);
+      members.clear();
+    };
+    int group_span = -1;
+    double group_frame_time_s = 0.0;
     for (Eigen::Index m = 0; m < observations.uv.rows(); ++m) {
       const Attachment& a = attached[m];
       if (!a.error.ok) continue;
@@ -250,6 +263,15 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
                                  observations.point_w(m, 2)};
       double* c0 = control + 6 * (a.span - 3);
       const double frame_offset_s = observations.frame_time_s[m] - basis.span_start;
+      if (group) {
+        if (a.span != group_span || observations.frame_time_s[m] != group_frame_time_s) {
+          flush_group(group_span);
+          group_span = a.span;
+          group_frame_time_s = observations.frame_time_s[m];
+        }
+        members.emplace_back(basis, cam, frame_offset_s, uv, point_w, a.error.sqrt_information);
+        continue;
+      }
       if (intrinsics) {
         problem->AddResidualBlock(
             RsReprojectionIntrinsicsCost::Create(basis, camera_model, frame_offset_s, uv, point_w,
@@ -265,6 +287,7 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
                                            a.error.sqrt_information);
       problem->AddResidualBlock(cost, loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s);
     }
+    flush_group(group_span);
     if (options.use_motion_prior) {
       for (int span = spline::kSplineDegree; span < trajectory->num_control_points(); ++span) {
         if (knots[span + 1] <= knots[span]) continue;
