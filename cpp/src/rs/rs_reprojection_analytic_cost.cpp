@@ -12,8 +12,8 @@ constexpr int kStateDim = geometry::kPoseStateDim;
 
 // r = W (y - pi(T(x) P)) for a pose state x; false if the point cannot be projected.
 template <typename T>
-bool ResidualOfState(const SpanCamera& cam, const WeightedMeasurement& measurement,
-                     const T* state, T* residual) {
+bool ResidualOfState(const SpanCamera& cam, const WeightedMeasurement& measurement, const T* state,
+                     T* residual) {
   T point_c[3];
   geometry::TransformWorldToCamera(state, measurement.point_w, point_c);
   T uv[2];
@@ -27,8 +27,7 @@ bool ResidualOfState(const SpanCamera& cam, const WeightedMeasurement& measureme
 AnalyticReprojectionTerm::AnalyticReprojectionTerm(const spline::SpanPowerBasis& basis_in,
                                                    const SpanCamera& cam_in,
                                                    double frame_time_minus_span_start_s,
-                                                   const double* uv_measured,
-                                                   const double* point_w,
+                                                   const double* uv_measured, const double* point_w,
                                                    const Eigen::Matrix2d& sqrt_information)
     : basis(basis_in),
       cam(cam_in),

@@ -62,7 +62,8 @@ TEST(RsReprojectionAnalyticCost, EqualsTheAutodiffFunctorAndCentralDifferences) 
     const rs::SpanCamera cam = rs::MakeSpanCamera(camera);
     for (int trial = 0; trial < 40; ++trial) {
       const spline::CubicBSpline curve = RandomPoseSpline(rng);
-      const int span = 3 + static_cast<int>(unit(rng) * curve.num_segments()) % curve.num_segments();
+      const int span =
+          3 + static_cast<int>(unit(rng) * curve.num_segments()) % curve.num_segments();
       const spline::SpanPowerBasis basis = curve.PowerBasis(span);
       const double length = curve.knots()[span + 1] - curve.knots()[span];
       const double point_w[3] = {offset(rng) * 4, offset(rng) * 4, 0.0};
@@ -143,7 +144,8 @@ TEST(RsReprojectionGroupCost, StacksTheErrorsOfItsMembers) {
   const rs::SpanCamera cam = rs::MakeSpanCamera(camera);
   const int span = 6;
   const spline::SpanPowerBasis basis = curve.PowerBasis(span);
-  const double line_delay = 45e-6, frame_offset = 0.2 * (curve.knots()[span + 1] - curve.knots()[span]);
+  const double line_delay = 45e-6,
+               frame_offset = 0.2 * (curve.knots()[span + 1] - curve.knots()[span]);
   std::vector<rs::AnalyticReprojectionTerm> members;
   for (int m = 0; m < 7; ++m) {
     const double point_w[3] = {offset(rng), offset(rng), 0.0};
