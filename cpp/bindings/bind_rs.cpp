@@ -50,6 +50,10 @@ void BindRs(py::module_& m) {
       .def_readwrite("parameter_tolerance", &RsSolverOptions::parameter_tolerance)
       .def_property("num_threads", &ThreadCount<RsSolverOptions>, &SetThreadCount<RsSolverOptions>)
       .def_readwrite("compute_covariance", &RsSolverOptions::compute_covariance)
+      .def_readwrite("analytic_jacobian", &RsSolverOptions::analytic_jacobian,
+                     "Jacobian chained through the basis weights (false: full autodiff)")
+      .def_readwrite("schur_variance", &RsSolverOptions::schur_variance,
+                     "sigma_d from the Schur complement (false: Ceres' covariance)")
       .def_readwrite("verbose", &RsSolverOptions::verbose)
       .def_readwrite("refine_intrinsics", &RsSolverOptions::refine_intrinsics,
                      "refine the camera's parameters jointly (docs/formulation.md §14)")

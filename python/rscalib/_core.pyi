@@ -154,6 +154,14 @@ class RsSolverOptions:
     def __init__(self) -> None:
         ...
     @property
+    def analytic_jacobian(self) -> bool:
+        """
+        Jacobian chained through the basis weights (false: full autodiff)
+        """
+    @analytic_jacobian.setter
+    def analytic_jacobian(self, arg0: bool) -> None:
+        ...
+    @property
     def fixed_intrinsics(self) -> list[int]:
         """
         indices of the camera's parameters held at their starting value
@@ -264,6 +272,14 @@ class RsSolverOptions:
         ...
     @robust_loss_scale.setter
     def robust_loss_scale(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def schur_variance(self) -> bool:
+        """
+        sigma_d from the Schur complement (false: Ceres' covariance)
+        """
+    @schur_variance.setter
+    def schur_variance(self, arg0: bool) -> None:
         ...
 class RsSolveSummary:
     @property

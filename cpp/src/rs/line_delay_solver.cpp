@@ -12,6 +12,7 @@
 #include "rscalib/core/error.hpp"
 #include "rscalib/rs/intrinsics_prior_cost.hpp"
 #include "rscalib/rs/motion_prior_cost.hpp"
+#include "rscalib/rs/rs_reprojection_analytic_cost.hpp"
 #include "rscalib/rs/rs_reprojection_cost.hpp"
 #include "rscalib/rs/rs_reprojection_intrinsics_cost.hpp"
 #include "solver_common.hpp"
@@ -240,6 +241,19 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
   };
   const auto add_residuals = [&](ceres::Problem* problem, ceres::LossFunction* loss) {
     if (intrinsics) intrinsics->AddTo(problem);
+    // Plain least squares with the analytic Jacobian: one residual block per run of observations
+    // with the same frame time and span (RsReprojectionGroupCost), the same sum of squares.
+    const bool group = options.analytic_jacobian && !loss && !intrinsics;
+    std::vector<AnalyticReprojectionTerm> members;
+    const auto flush_group = [&](int span) {
+      if (members.empty()) return;
+      double* c0 = control + 6 * (span - 3);
+      problem->AddResidualBlock(new RsReprojectionGroupCost(std::move(members)), nullptr, c0,
+                                c0 + 6, c0 + 12, c0 + 18, line_delay_s);
+      members.clear();
+    };
+    int group_span = -1;
+    double group_frame_time_s = 0.0;
     for (Eigen::Index m = 0; m < observations.uv.rows(); ++m) {
       const Attachment& a = attached[m];
       if (!a.error.ok) continue;
@@ -249,6 +263,15 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
                                  observations.point_w(m, 2)};
       double* c0 = control + 6 * (a.span - 3);
       const double frame_offset_s = observations.frame_time_s[m] - basis.span_start;
+      if (group) {
+        if (a.span != group_span || observations.frame_time_s[m] != group_frame_time_s) {
+          flush_group(group_span);
+          group_span = a.span;
+          group_frame_time_s = observations.frame_time_s[m];
+        }
+        members.emplace_back(basis, cam, frame_offset_s, uv, point_w, a.error.sqrt_information);
+        continue;
+      }
       if (intrinsics) {
         problem->AddResidualBlock(
             RsReprojectionIntrinsicsCost::Create(basis, camera_model, frame_offset_s, uv, point_w,
@@ -256,10 +279,15 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
             loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s, intrinsics->value.data());
         continue;
       }
-      problem->AddResidualBlock(RsReprojectionCost::Create(basis, cam, frame_offset_s, uv, point_w,
-                                                           a.error.sqrt_information),
-                                loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s);
+      ceres::CostFunction* cost =
+          options.analytic_jacobian
+              ? new RsReprojectionAnalyticCost(basis, cam, frame_offset_s, uv, point_w,
+                                               a.error.sqrt_information)
+              : RsReprojectionCost::Create(basis, cam, frame_offset_s, uv, point_w,
+                                           a.error.sqrt_information);
+      problem->AddResidualBlock(cost, loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s);
     }
+    flush_group(group_span);
     if (options.use_motion_prior) {
       for (int span = spline::kSplineDegree; span < trajectory->num_control_points(); ++span) {
         if (knots[span + 1] <= knots[span]) continue;
@@ -273,6 +301,7 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
       detail::MakeSolveSettings(options, true, "the line-delay solve failed: ");
   if (intrinsics)
     settings.joint_covariance_blocks = {{intrinsics->value.data(), kIntrinsicsBlockSize}};
+  settings.schur_variance = options.schur_variance && !intrinsics;
   const detail::SolveResult result =
       detail::SolveWithCovariance(settings, line_delay_s, started, reattach, add_residuals);
   result.CopyTo(&summary);

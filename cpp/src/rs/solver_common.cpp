@@ -4,6 +4,9 @@
 #include <optional>
 #include <utility>
 
+#include <Eigen/SparseCholesky>
+#include <Eigen/SparseCore>
+
 #include "rscalib/core/error.hpp"
 #include "rscalib/rs/error_standardisation.hpp"
 
@@ -82,6 +85,63 @@ std::optional<Eigen::MatrixXd> JointCovariance(
 }
 
 }  // namespace
+
+std::optional<double> SchurVariance(ceres::Problem* problem, double* line_delay, int num_threads) {
+  // Columns: d first, then the other blocks in the problem's order.
+  std::vector<double*> all_blocks;
+  problem->GetParameterBlocks(&all_blocks);
+  std::vector<double*> blocks = {line_delay};
+  int num_cols = 1;
+  for (double* block : all_blocks) {
+    if (block == line_delay) continue;
+    if (problem->IsParameterBlockConstant(block)) return std::nullopt;
+    blocks.push_back(block);
+    num_cols += problem->ParameterBlockTangentSize(block);
+  }
+  if (problem->ParameterBlockTangentSize(line_delay) != 1) return std::nullopt;
+  std::vector<ceres::ResidualBlockId> residual_blocks;
+  problem->GetResidualBlocks(&residual_blocks);
+
+  // H = sum over chunks of J_chunk^T J_chunk: the whole Jacobian is never held at once.
+  using SparseMatrix = Eigen::SparseMatrix<double>;
+  SparseMatrix h(num_cols, num_cols);
+  ceres::Problem::EvaluateOptions evaluate_options;
+  evaluate_options.parameter_blocks = blocks;
+  evaluate_options.num_threads = std::max(1, num_threads);
+  constexpr size_t kChunk = 16384;
+  for (size_t begin = 0; begin < residual_blocks.size(); begin += kChunk) {
+    const size_t end = std::min(residual_blocks.size(), begin + kChunk);
+    evaluate_options.residual_blocks.assign(residual_blocks.begin() + begin,
+                                            residual_blocks.begin() + end);
+    ceres::CRSMatrix jacobian;
+    if (!problem->Evaluate(evaluate_options, nullptr, nullptr, nullptr, &jacobian))
+      return std::nullopt;
+    const Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>> j(
+        jacobian.num_rows, jacobian.num_cols, static_cast<Eigen::Index>(jacobian.values.size()),
+        jacobian.rows.data(), jacobian.cols.data(), jacobian.values.data());
+    h += SparseMatrix(j.transpose() * j);
+  }
+
+  const Eigen::Index n = num_cols - 1;
+  const double h_dd = h.coeff(0, 0);
+  const SparseMatrix h_cc = h.block(1, 1, n, n);
+  const Eigen::VectorXd h_cd = Eigen::VectorXd(h.col(0)).tail(n);
+  const Eigen::VectorXd diagonal = h_cc.diagonal();
+  if (!(h_dd > 0.0) || !(diagonal.array() > 0.0).all() || !h.coeffs().allFinite())
+    return std::nullopt;
+  // Jacobi scaling: metres, radians and s/row differ by orders of magnitude.
+  const Eigen::VectorXd scale = diagonal.cwiseSqrt().cwiseInverse();
+  const SparseMatrix scaled = scale.asDiagonal() * h_cc * scale.asDiagonal();
+  const Eigen::SimplicialLDLT<SparseMatrix> ldlt(scaled);
+  if (ldlt.info() != Eigen::Success) return std::nullopt;
+  const Eigen::VectorXd pivots = ldlt.vectorD();
+  if (!(pivots.minCoeff() > 1e-14 * pivots.maxCoeff())) return std::nullopt;
+  const Eigen::VectorXd scaled_h_cd = scale.cwiseProduct(h_cd);
+  const double schur = h_dd - scaled_h_cd.dot(ldlt.solve(scaled_h_cd));
+  // Not determined (or lost to rounding): let the rank-revealing path decide.
+  if (!(schur > 1e-14 * h_dd) || !std::isfinite(schur)) return std::nullopt;
+  return 1.0 / schur;
+}
 
 void ValidateNoiseOptions(double pixel_sigma, double max_rs_gain) {
   if (!(pixel_sigma > 0.0)) throw InputError("pixel_sigma must be positive");
@@ -163,10 +223,15 @@ SolveResult SolveWithCovariance(const SolveSettings& settings, double* line_dela
         result.line_delay_std_s = std::sqrt((*joint)(0, 0));
         result.covariance_ok = true;
       }
-    } else if (const auto variance =
-                   ScalarVariance(problem.get(), line_delay_s, settings.num_threads)) {
-      result.line_delay_std_s = std::sqrt(*variance);
-      result.covariance_ok = true;
+    } else {
+      std::optional<double> variance;
+      if (settings.schur_variance && !loss)
+        variance = SchurVariance(problem.get(), line_delay_s, settings.num_threads);
+      if (!variance) variance = ScalarVariance(problem.get(), line_delay_s, settings.num_threads);
+      if (variance) {
+        result.line_delay_std_s = std::sqrt(*variance);
+        result.covariance_ok = true;
+      }
     }
     result.covariance_time_s = Seconds(covariance_started);
   } else if (!settings.estimate_line_delay) {

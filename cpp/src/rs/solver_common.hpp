@@ -13,6 +13,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -45,6 +46,9 @@ struct SolveSettings {
   // Optional: further parameter blocks (pointer, ambient size) whose covariance with d is
   // wanted (SolveResult::joint_covariance). Empty: only the variance of d (the default path).
   std::vector<std::pair<const double*, int>> joint_covariance_blocks;
+  // The variance of d from the Schur complement of the normal equations (no robust loss, no
+  // joint blocks), Ceres' covariance when that is not possible. false: Ceres' covariance.
+  bool schur_variance = false;
 };
 
 // From the options both solvers have (RsSolverOptions, LinearInterpOptions): DOGLEG on
@@ -162,6 +166,12 @@ struct SolveResult {
     summary->covariance_time_s = covariance_time_s;
   }
 };
+
+// Variance of the 1-D parameter block `line_delay` from the normal equations H = J^T J of the
+// plain least-squares problem `problem` (no loss functions, no manifolds): 1 / (h_dd - h_dc
+// H_cc^{-1} h_cd), with H_cc the rest (sparse LDLT after Jacobi scaling). nullopt when H_cc is
+// not positive definite; +inf when d is not determined (Schur complement <= 1e-14 h_dd).
+std::optional<double> SchurVariance(ceres::Problem* problem, double* line_delay, int num_threads);
 
 // Called at the start of every outer iteration: re-linearise at the current estimate
 // (attach / pair every observation, recompute the weights) and return whether any

@@ -77,6 +77,8 @@ def add_parser(sub) -> None:
     p.add_argument("--no-self-check", action="store_true",
                    help="do not solve the two halves of the video separately (faster; the error bar is not checked)")
     p.add_argument("--max-rounds", type=whole(1, 100), default=8, help="knot-adaptation rounds at most (8)")
+    p.add_argument("--no-report", action="store_true",
+                   help="no plots and no report.html (batch use): result.json, trajectories and camera files only")
     add_lens_profile_options(p)
     advanced = p.add_argument_group("advanced (baselines and ablations for experiments; the defaults are the method)")
     advanced.add_argument("--noise-model", choices=["frame", "video"], default="frame",
@@ -202,7 +204,7 @@ def _check_out(args) -> None:
 
 def run_linedelay(args) -> int:
     from ..linedelay.pipeline import calibrate_video
-    from ..linedelay.report import NOT_TRUSTED, TRUSTED, UNDETERMINED, write_video_outputs
+    from ..linedelay.report import NOT_TRUSTED, UNDETERMINED, write_video_outputs
 
     _check_flags(args)
     _check_out(args)
@@ -214,7 +216,23 @@ def run_linedelay(args) -> int:
                           readout=args.readout, self_check=not args.no_self_check,
                           min_segment_s=None if args.min_segment_ms is None else args.min_segment_ms * 1e-3,
                           noise_model=args.noise_model, **_refine_options(args), **_common_options(args, solving))
-    summary = write_video_outputs(run, args.out, gyroflow=lens_profile_names(args))
+    # the result is printed as soon as result.json is written, before the plots are drawn
+    summary = write_video_outputs(run, args.out, gyroflow=lens_profile_names(args), report=not args.no_report,
+                                  on_result=lambda written: _print_result(run, written))
+    status = summary["verdict"]["status"]
+    if args.no_report:
+        print(f"results: {Path(args.out) / 'result.json'}")
+    else:
+        print(f"report: {Path(args.out) / 'report.html'}")
+    if status == UNDETERMINED:
+        return EXIT_UNDETERMINED
+    return EXIT_NOT_TRUSTED if status == NOT_TRUSTED else EXIT_OK
+
+
+def _print_result(run, summary: dict) -> None:
+    """The line delay (or why there is none), the verdict's reasons, advice and warnings."""
+    from ..linedelay.report import TRUSTED, UNDETERMINED
+
     result = run.result
     status = summary["verdict"]["status"]
     if status == UNDETERMINED:
@@ -242,10 +260,6 @@ def run_linedelay(args) -> int:
     _print_warnings(summary)
     if status != TRUSTED:
         print(f"  how to film a better video: {CAPTURE_GUIDE}")
-    print(f"report: {Path(args.out) / 'report.html'}")
-    if status == UNDETERMINED:
-        return EXIT_UNDETERMINED
-    return EXIT_NOT_TRUSTED if status == NOT_TRUSTED else EXIT_OK
 
 
 def run_localize(args) -> int:

@@ -24,7 +24,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional, Union
+from typing import TYPE_CHECKING, Callable, Optional, Union
 
 import matplotlib
 
@@ -330,10 +330,10 @@ def plot_trajectory(result: Estimate, path: Path) -> Path:
     return _save(fig, path)
 
 
-def _plots(result: Estimate, out: Path, failed: list) -> dict:
-    """The report's plots of a line-delay estimate, {caption: path}: residuals and trajectory for
-    both models; the spline's error ellipses, knot density and rounds besides (the linear model has
-    no knots, no rounds and, by default, unstandardised errors)."""
+def _plot_jobs(result: Estimate) -> list:
+    """The report's plots of a line-delay estimate, (caption, plot function, file name): residuals and
+    trajectory for both models; the spline's error ellipses, knot density and rounds besides (the linear
+    model has no knots, no rounds and, by default, unstandardised errors)."""
     jobs = [("residuals over time", plot_residuals_time, "residuals_time.png"),
             ("residuals over the image and target coverage", plot_residuals_image, "residuals_image.png")]
     if isinstance(result, LineDelayResult):
@@ -342,6 +342,13 @@ def _plots(result: Estimate, out: Path, failed: list) -> dict:
                  ("knot density and image motion", plot_knots_and_speed, "knots_speed.png"),
                  ("line delay per knot-adaptation round", plot_rounds, "rounds.png")]
     jobs.append(("trajectory", plot_trajectory, "trajectory.png"))
+    return jobs
+
+
+def _plots(result: Estimate, out: Path, failed: list) -> dict:
+    """The plots of _plot_jobs drawn into out, {caption: path}; the ones that fail are left out
+    and said in `failed`."""
+    jobs = _plot_jobs(result)
     plots = {}
     for caption, plot, name in jobs:
         # a plot of degenerate data (NaN, infinite sigma) must not cost the user the result
@@ -371,13 +378,17 @@ def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_tota
                   extra: Optional[dict] = None, fps: float = 0.0, title: Optional[str] = None,
                   command: str = "linedelay", inputs: Optional[dict] = None,
                   detections: Optional[DetectionResult] = None, readout: str = "top-down",
-                  gyroflow: Optional[dict] = None) -> dict:
+                  gyroflow: Optional[dict] = None, report: bool = True,
+                  on_result: Optional[Callable[[dict], None]] = None) -> dict:
     """Everything of a line-delay estimate (spline or linear model) into out_dir: result.json,
     trajectory.csv and trajectory_tum.txt, the camera files of every format, the detections as
     corners.vnl (when given), the plots and report.html. Returns the result.json dict (without its
     provenance). frames_total: frames read (default: the result's); extra: more result.json fields;
     fps: for the Gyroflow profile; readout: the readout direction (linedelay.readout); gyroflow:
-    camera_brand, camera_model, lens_model for its profile; command, inputs: the provenance."""
+    camera_brand, camera_model, lens_model for its profile; command, inputs: the provenance.
+    report: False leaves out the plots and report.html (batch use). on_result(summary) is called once
+    result.json is written (in the staging folder) and before the plots are drawn (the CLI prints the
+    result there); the folder's files appear together when the plots are done."""
     with output_set(out_dir) as staged:
         out, summary = _start(result, staged, frames_total, extra)
         summary["image_readout_time_s"] = image_readout_time_s(result)
@@ -398,16 +409,23 @@ def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_tota
                 files["mrcal_corners"] = "corners.vnl"
             else:
                 notes.append(skipped)
-        plots = _plots(result, out, warnings)
-        files["plots"] = [p.name for p in plots.values()]
-        files["report"] = "report.html"
+        if report:  # listed now, drawn after the result is out; result.json is rewritten if one fails
+            files["plots"] = [name for _, _, name in _plot_jobs(result)]
+            files["report"] = "report.html"
         summary["warnings"] = warnings
         summary["export_notes"] = notes
         summary["files"] = files
         result_path = write_result_json(out, summary, command=command, inputs=inputs)
-        if title is None:
-            title = "rscalib linedelay" + (" --trajectory linear" if isinstance(result, LinearInterpResult) else "")
-        _write_html(out / "report.html", title, summary, v, plots, _provenance_of(result_path))
+        if on_result is not None:
+            on_result(summary)
+        if report:
+            plots = _plots(result, out, warnings)
+            if len(plots) < len(files["plots"]):
+                files["plots"] = [p.name for p in plots.values()]
+                result_path = write_result_json(out, summary, command=command, inputs=inputs)
+            if title is None:
+                title = "rscalib linedelay" + (" --trajectory linear" if isinstance(result, LinearInterpResult) else "")
+            _write_html(out / "report.html", title, summary, v, plots, _provenance_of(result_path))
     return summary
 
 
@@ -440,10 +458,12 @@ def write_pnp_outputs(trajectory: PnpTrajectory, out_dir, *, frames_total: Optio
 
 
 def write_video_outputs(run: VideoResult, out_dir, command: Optional[str] = None,
-                        gyroflow: Optional[dict] = None) -> dict:
+                        gyroflow: Optional[dict] = None, report: bool = True,
+                        on_result: Optional[Callable[[dict], None]] = None) -> dict:
     """The outputs of a linedelay/pipeline.py run, by its model; returns the result.json dict.
     command: the provenance's command (default: `linedelay` or `localize`, by the model);
-    gyroflow: camera_brand, camera_model, lens_model for the Gyroflow profile."""
+    gyroflow: camera_brand, camera_model, lens_model for the Gyroflow profile; report, on_result:
+    write_outputs' (line-delay models only)."""
     common = dict(frames_total=run.detection.frames_total, extra=run.summary_extra(), inputs=run.inputs,
                   command=command or run.command)
     if run.model == "rs-spline":
@@ -451,7 +471,8 @@ def write_video_outputs(run: VideoResult, out_dir, command: Optional[str] = None
     if run.model == "gs-pnp":
         return write_pnp_outputs(run.result, out_dir, **common)
     return write_outputs(run.result, run.camera, out_dir, fps=run.fps, detections=run.detection,
-                         readout=run.settings.get("readout", "top-down"), gyroflow=gyroflow, **common)
+                         readout=run.settings.get("readout", "top-down"), gyroflow=gyroflow, report=report,
+                         on_result=on_result, **common)
 
 
 def _provenance_of(result_path: Path) -> dict:

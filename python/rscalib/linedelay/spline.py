@@ -41,6 +41,11 @@ NOISE_MODELS = ("frame", "video")
 # Rounds before the last are re-solved after knot insertion anyway: solve them loosely.
 _ROUND_MAX_ITERATIONS = 30
 _ROUND_FUNCTION_TOLERANCE = 1e-6
+_FINAL_MAX_ITERATIONS = 100
+_FINAL_FUNCTION_TOLERANCE = 1e-9
+# A round that splits at most this fraction of the segments is followed by the final (tight) round:
+# after such a round (~7 % split on hand-held videos) the next splits at most a few per mille.
+_FINAL_AFTER_SPLITS = 0.1
 
 
 @dataclass
@@ -134,6 +139,13 @@ def _solver_options(pixel_sigma: float, *, estimate_line_delay: bool, standardis
     options.num_threads = int(num_threads)
     options.compute_covariance = compute_covariance
     return options
+
+
+def _set_tolerance(options: _core.RsSolverOptions, *, final: bool, covariance: bool) -> None:
+    """Loose for the knot-adaptation rounds, tight for the final solve; sigma_d only when asked."""
+    options.max_iterations = _FINAL_MAX_ITERATIONS if final else _ROUND_MAX_ITERATIONS
+    options.function_tolerance = _FINAL_FUNCTION_TOLERANCE if final else _ROUND_FUNCTION_TOLERANCE
+    options.compute_covariance = covariance
 
 
 def initial_trajectory(observations: Observations, poses: FramePoses, line_delay_s: float,
@@ -290,10 +302,13 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     history: list[RoundRecord] = []
     adapted = not adaptive_knots
     summary = None
-    options.max_iterations = _ROUND_MAX_ITERATIONS
-    options.function_tolerance = _ROUND_FUNCTION_TOLERANCE
+    # Rounds are solved loosely, except the final one: tight, then sigma_d alone. A round is final when
+    # the round before split few segments (those rarely split again; if the final round still splits
+    # some, another round follows). Otherwise a polish on the final knots ends the solve.
+    final = False
     for round_index in range(max(1, max_rounds)):
         last_chance = round_index == max_rounds - 1
+        _set_tolerance(options, final=final, covariance=False)
         summary = _core.solve_line_delay(*args, trajectory, d, options)
         d = summary.line_delay_s
         if refine_intrinsics:  # the next round starts from the refined camera
@@ -308,11 +323,12 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
             sq = np.asarray(summary.standardised_sq) * (obs_sigma / new_sigma) ** 2
             segment_cost = _segment_sums(trajectory, np.asarray(summary.observation_time_s), sq,
                                          len(summary.segment_cost))
-            obs_sigma = new_sigma
-            use_sigma(obs_sigma)
         new_knots, at_cap = _split_segments(trajectory, segment_cost, summary.segment_count,
                                             min_segment_s, split_margin_sigmas,
                                             structure.correlation) if adaptive_knots else ([], 0)
+        if per_frame and not (final and not new_knots):  # the next solve weighs the errors by it
+            obs_sigma = new_sigma
+            use_sigma(obs_sigma)
         record = RoundRecord(round_index, trajectory.num_segments, d, float("nan"), cost, summary.rms_px,
                              0 if last_chance else len(new_knots), at_cap, summary.iterations,
                              summary.solve_time_s)
@@ -326,28 +342,34 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
             break
         for t in new_knots:
             trajectory.insert_knot(t)
+        final = len(new_knots) <= _FINAL_AFTER_SPLITS * trajectory.num_segments
     if adaptive_knots and not adapted:
         warnings.append(f"knot adaptation stopped at the round cap ({max_rounds}) with segments still "
                         "above their expected cost")
 
-    # Final polish at tight tolerance on the final knots, with the covariance of d.
-    options.max_iterations = 100
-    options.function_tolerance = 1e-9
-    options.compute_covariance = estimate
-    summary = _core.solve_line_delay(*args, trajectory, d, options)
-    d = summary.line_delay_s
+    if final and adapted:
+        if estimate:  # sigma_d at the final estimate: only the covariance, nothing moves
+            _set_tolerance(options, final=True, covariance=True)
+            options.max_iterations = 0
+            summary = _core.solve_line_delay(*args, trajectory, d, options)
+            history[-1].solve_time_s += summary.solve_time_s
+    else:
+        # Final polish at tight tolerance on the final knots, with the covariance of d.
+        _set_tolerance(options, final=True, covariance=estimate)
+        summary = _core.solve_line_delay(*args, trajectory, d, options)
+        d = summary.line_delay_s
+        if refine_intrinsics:
+            camera = _with_params(camera, summary.intrinsics)
+        if per_frame:
+            structure = noise.residual_structure(used, np.asarray(summary.residual_px), white)
+        history[-1].iterations += summary.iterations
+        history[-1].solve_time_s += summary.solve_time_s
     intrinsics = None
-    if refine_intrinsics:
-        camera = _with_params(camera, summary.intrinsics)
-    if per_frame:
-        structure = noise.residual_structure(used, np.asarray(summary.residual_px), white)
     solver_std = summary.line_delay_std_s if estimate else 0.0
     # correlated errors carry less information than their number says (AR(1) effective sample size)
     std = solver_std * structure.inflation if estimate else 0.0
     history[-1].line_delay_s = d
     history[-1].line_delay_std_s = std
-    history[-1].iterations += summary.iterations
-    history[-1].solve_time_s += summary.solve_time_s
 
     cost, sigma, determined = assess_noise_and_determinacy(summary, sigma, sigma_source, nominal_delay_s, warnings,
                                                            estimate=estimate, std_s=std)

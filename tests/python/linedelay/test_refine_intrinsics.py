@@ -61,13 +61,51 @@ def _golden_fields(result) -> dict:
     return json.loads(json.dumps(keep))
 
 
-def test_the_default_path_is_bit_identical_to_before_the_feature():
+def _default_path(monkeypatch=None):
+    """calibrate_line_delay on the golden file's simulation; with `monkeypatch`, on the reference solver
+    path (autodiff of the whole functor, Ceres' covariance: the arithmetic before issue 17)."""
+    if monkeypatch is not None:
+        make_options = spline._solver_options
+
+        def reference_options(*args, **kwargs):
+            options = make_options(*args, **kwargs)
+            options.analytic_jacobian = False
+            options.schur_variance = False
+            return options
+
+        monkeypatch.setattr(spline, "_solver_options", reference_options)
     sim = simulate.simulate_observations(CAMERA, 30e-6, fps=30.0, duration_s=3.0, noise_px=0.3, seed=4242)
-    result = spline.calibrate_line_delay(sim.observations, CAMERA)
+    return spline.calibrate_line_delay(sim.observations, CAMERA)
+
+
+def test_the_default_path_is_bit_identical_to_before_the_feature(monkeypatch):
+    result = _default_path(monkeypatch)
     assert _golden_fields(result) == json.loads(GOLDEN.read_text())
     assert result.intrinsics is None and result.camera is None
     assert "intrinsics" not in result.summary_dict()
     assert _core.RsSolverOptions().refine_intrinsics is False
+
+
+def test_the_leaner_solve_gives_the_golden_numbers_to_rounding():
+    """The default solver (Jacobian chained by hand, sigma_d from the Schur complement; issue 17) rounds
+    differently: the same knots, rounds and counts, every number to 1e-9 relative."""
+    got, golden = _golden_fields(_default_path()), json.loads(GOLDEN.read_text())
+    assert got["knots"] == golden["knots"] and got["keys"] == golden["keys"]
+    assert [{k: v for k, v in h.items() if not isinstance(v, float)} for h in got["history"]] == \
+        [{k: v for k, v in h.items() if not isinstance(v, float)} for h in golden["history"]]
+    for name, value in golden.items():
+        if isinstance(value, float):
+            assert got[name] == pytest.approx(value, rel=1e-9), name
+        elif isinstance(value, (bool, int)):
+            assert got[name] == value, name
+    for mine, theirs in zip(got["history"], golden["history"]):
+        for name, value in theirs.items():
+            if isinstance(value, float):
+                assert mine[name] == pytest.approx(value, rel=1e-9), name
+    for name in ("control_points_hex", "line_delay_hex", "std_hex"):
+        mine = np.array([float.fromhex(x) for x in np.atleast_1d(got[name])])
+        theirs = np.array([float.fromhex(x) for x in np.atleast_1d(golden[name])])
+        np.testing.assert_allclose(mine, theirs, rtol=1e-9, atol=1e-12, err_msg=name)
 
 
 @pytest.mark.parametrize("seed", [3101, 3102])

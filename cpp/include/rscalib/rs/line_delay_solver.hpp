@@ -44,6 +44,14 @@ struct RsSolverOptions {
   double parameter_tolerance = 1e-10;
   int num_threads = 2;
   bool compute_covariance = true;
+  // The Jacobian of the reprojection errors chained by hand through the basis weights
+  // (RsReprojectionAnalyticCost, docs/formulation.md §15); false: autodiff of the whole functor
+  // (RsReprojectionCost; the same numbers, slower; kept as the reference).
+  bool analytic_jacobian = true;
+  // sigma_d from the Schur complement of the normal equations (docs/formulation.md §15); false:
+  // Ceres' covariance (sparse QR). The Schur path falls back to Ceres' when the trajectory block
+  // is singular or a robust loss is used; with refine_intrinsics Ceres' covariance is always used.
+  bool schur_variance = true;
   bool verbose = false;
   // Joint refinement of the intrinsics (docs/formulation.md §14). false: the camera is known
   // (the path of every other option, unchanged). true: the camera's parameters (its layout,

@@ -1,0 +1,167 @@
+"""The leaner line-delay solve (issue 17, docs/formulation.md §15) gives the numbers of the reference path.
+
+- The Jacobian chained by hand through the basis weights (RsSolverOptions.analytic_jacobian, the default)
+  against autodiff of the whole functor (analytic_jacobian = False): one solve from the same perturbed
+  start must end at the same line delay (1e-9 relative) and trajectory.
+- sigma_d from the Schur complement of the normal equations (schur_variance, the default) against Ceres'
+  covariance by sparse QR (schur_variance = False): the same sigma_d to 1e-6 relative, with and without
+  per-observation noise, and the same answer where the Schur path hands over (robust loss).
+- The schedule of rounds: a round after which few segments split is the final, tight one; the adaptation
+  still ends where its split test says so.
+- `--no-report`: result.json, trajectories and camera files, no plots, no report.html; the result is
+  handed out (printed by the CLI) before any plot is drawn.
+"""
+import json
+
+import numpy as np
+import pytest
+
+import rscalib
+from rscalib import _core
+from rscalib.cli import main as cli_main
+from rscalib.linedelay import report, spline
+from rscalib.sim import target_observations as simulate
+
+
+@pytest.fixture(scope="module")
+def problem():
+    """A 4 s hand-held simulation, its calibration and the solver's inputs."""
+    sim = simulate.simulate_default(line_delay_s=30e-6, duration_s=4.0, seed=31, noise_px=0.3)
+    c = sim.camera
+    camera = rscalib.CameraModel(c.model, c.params, c.width, c.height)
+    result = spline.calibrate_line_delay(sim.observations, camera)
+    used = result.used_observations
+    args = (used.frame_times_s[used.frame_index], used.uv, used.points_w(), camera)
+    return sim, camera, result, args
+
+
+def _options(result, **flags) -> _core.RsSolverOptions:
+    options = _core.RsSolverOptions()
+    options.pixel_sigma = result.pixel_sigma
+    options.observation_sigma = np.asarray(result.observation_sigma_px, dtype=np.float64)
+    options.motion_prior_q = np.asarray(spline.DEFAULT_MOTION_PRIOR_Q, dtype=np.float64)
+    options.function_tolerance = 1e-12
+    options.gradient_tolerance = 1e-14
+    options.parameter_tolerance = 1e-14
+    for name, value in flags.items():
+        setattr(options, name, value)
+    return options
+
+
+def _solve(problem, perturb: bool = True, **flags):
+    """One solve from the calibrated trajectory (perturbed by a fixed pattern) and d 10 % off."""
+    _, _, result, args = problem
+    start = result.trajectory
+    control = np.array(start.control_points)
+    if perturb:
+        rng = np.random.default_rng(5)
+        control += rng.normal(0.0, 1e-3, control.shape)
+    trajectory = _core.BSpline(list(start.knots), control)
+    d0 = result.line_delay_s * (1.1 if perturb else 1.0)
+    summary = _core.solve_line_delay(*args, trajectory, d0, _options(result, **flags))
+    return summary, trajectory
+
+
+def test_the_analytic_jacobian_solves_to_the_autodiff_answer(problem):
+    analytic, traj_a = _solve(problem, analytic_jacobian=True, compute_covariance=False)
+    autodiff, traj_r = _solve(problem, analytic_jacobian=False, compute_covariance=False)
+    assert analytic.iterations > 2  # the start was off: this is a real solve
+    assert analytic.line_delay_s == pytest.approx(autodiff.line_delay_s, rel=1e-9)
+    assert analytic.measurement_cost == pytest.approx(autodiff.measurement_cost, rel=1e-9)
+    np.testing.assert_allclose(np.asarray(traj_a.control_points), np.asarray(traj_r.control_points),
+                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(analytic.residual_px), np.asarray(autodiff.residual_px), atol=1e-7)
+
+
+@pytest.mark.parametrize("per_observation_sigma", [True, False])
+def test_sigma_d_from_the_schur_complement_equals_the_ceres_covariance(problem, per_observation_sigma):
+    _, _, result, args = problem
+    flags = dict(max_iterations=0)  # the covariance at the calibrated estimate, nothing moves
+    if not per_observation_sigma:
+        flags["observation_sigma"] = np.zeros(0)
+    schur, _ = _solve(problem, perturb=False, schur_variance=True, **flags)
+    ceres, _ = _solve(problem, perturb=False, schur_variance=False, **flags)
+    assert schur.covariance_ok and ceres.covariance_ok
+    assert 0 < schur.line_delay_std_s < 0.05 * result.line_delay_s
+    assert schur.line_delay_std_s == pytest.approx(ceres.line_delay_std_s, rel=1e-6)
+
+
+def test_a_robust_loss_gets_the_ceres_covariance(problem):
+    schur, _ = _solve(problem, perturb=False, max_iterations=0, robust_loss="huber", schur_variance=True)
+    ceres, _ = _solve(problem, perturb=False, max_iterations=0, robust_loss="huber", schur_variance=False)
+    assert schur.covariance_ok
+    assert schur.line_delay_std_s == ceres.line_delay_std_s
+
+
+def test_sigma_d_without_the_motion_prior(problem):
+    """Without the prior, H of the trajectory alone is barely conditioned by the data: both paths agree."""
+    schur, _ = _solve(problem, perturb=False, max_iterations=0, use_motion_prior=False, schur_variance=True)
+    ceres, _ = _solve(problem, perturb=False, max_iterations=0, use_motion_prior=False, schur_variance=False)
+    assert schur.covariance_ok == ceres.covariance_ok
+    if ceres.covariance_ok:
+        assert schur.line_delay_std_s == pytest.approx(ceres.line_delay_std_s, rel=1e-6)
+
+
+def test_the_calibration_is_within_its_error_bar_and_the_split_test_is_satisfied(problem):
+    sim, _, result, _ = problem
+    assert abs(result.line_delay_s - sim.line_delay_s) <= 3 * result.line_delay_std_s
+    assert result.history[-1].segments_split == 0
+    assert np.isfinite(result.history[-1].line_delay_std_s)
+    # the final round's numbers are the result's
+    assert result.history[-1].line_delay_s == result.line_delay_s
+    assert result.history[-1].segments == result.num_segments
+
+
+def test_a_final_round_after_few_splits_gives_the_polished_answer(problem, monkeypatch):
+    """Every round after a split made final (the 2 % rule at 100 %): the adaptation ends on a tight round
+    and sigma_d is computed alone at its estimate. Same knots as the loose-rounds-plus-polish path, the
+    same d well within sigma_d, and sigma_d is Ceres' covariance at the returned estimate."""
+    sim, camera, default, _ = problem
+    monkeypatch.setattr(spline, "_FINAL_AFTER_SPLITS", 1.0)
+    result = spline.calibrate_line_delay(sim.observations, camera)
+    assert len(result.history) >= 2 and result.history[-2].segments_split > 0
+    np.testing.assert_array_equal(result.knots, default.knots)
+    assert abs(result.line_delay_s - default.line_delay_s) < 1e-3 * default.line_delay_std_s
+    reference = _core.solve_line_delay(*problem[3], _core.BSpline(list(result.trajectory.knots),
+                                                                  np.array(result.trajectory.control_points)),
+                                       result.line_delay_s,
+                                       _options(result, max_iterations=0, schur_variance=False))
+    assert result.solver_line_delay_std_s == pytest.approx(reference.line_delay_std_s, rel=1e-6)
+    assert result.solver_line_delay_std_s == pytest.approx(default.solver_line_delay_std_s, rel=1e-3)
+
+
+def test_no_report_writes_the_result_and_no_plots(problem, tmp_path):
+    _, camera, result, _ = problem
+    seen = []
+
+    def on_result(summary):
+        seen.append(sorted(p.name for p in tmp_path.iterdir()))
+
+    summary = report.write_outputs(result, camera, tmp_path, report=False, on_result=on_result)
+    names = {p.name for p in tmp_path.iterdir()}
+    assert "result.json" in names and "trajectory.csv" in names and "camera_with_line_delay.yaml" in names
+    assert not any(n.endswith(".png") for n in names) and "report.html" not in names
+    written = json.loads((tmp_path / "result.json").read_text())
+    assert "plots" not in written["files"] and "report" not in written["files"]
+    assert written["line_delay_s"] == summary["line_delay_s"] == result.line_delay_s
+    assert len(seen) == 1 and "result.json" in seen[0]
+
+
+def test_the_result_is_out_before_the_plots_are_drawn(problem, tmp_path):
+    _, camera, result, _ = problem
+    seen = []
+    summary = report.write_outputs(result, camera, tmp_path,
+                                   on_result=lambda s: seen.append(sorted(p.name for p in tmp_path.iterdir())))
+    assert len(seen) == 1 and "result.json" in seen[0]
+    assert not any(n.endswith(".png") for n in seen[0]) and "report.html" not in seen[0]
+    # afterwards the report is complete, and result.json lists what is there
+    written = json.loads((tmp_path / "result.json").read_text())
+    assert written["files"]["plots"] == summary["files"]["plots"]
+    for name in written["files"]["plots"] + ["report.html"]:
+        assert (tmp_path / name).stat().st_size > 0
+
+
+def test_the_cli_knows_no_report(capsys):
+    with pytest.raises(SystemExit):
+        cli_main(["linedelay", "--help"])
+    assert "--no-report" in capsys.readouterr().out
