@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import hashlib
 import os
+import queue
 import sys
+import threading
 import time
 from collections import deque
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import Optional, Sequence, Union
+from typing import Iterator, Optional, Sequence, Union
 
 import cv2
 import numpy as np
@@ -21,6 +23,7 @@ from ..observations import Observations
 from .cache import default_cache_dir, load_cache, save_cache
 from .detectors import DETECTOR_VERSION, DROP_REASONS, DetectOptions, Detector, FrameDetection
 from .result import DetectionResult
+from .tracking import RunDetector, detect_run, run_length
 
 
 def usable_cores() -> int:
@@ -78,8 +81,8 @@ def _worker_init(target: Target, options: DetectOptions) -> None:
     _WORKER_DETECTOR = Detector(target, options)
 
 
-def _worker_detect(image: np.ndarray) -> FrameDetection:
-    return _WORKER_DETECTOR.detect(image)
+def _worker_detect_run(images: list, indices: list) -> list:
+    return detect_run(_WORKER_DETECTOR, images, indices)
 
 
 def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, workers: Optional[int],
@@ -116,12 +119,31 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
         # spawn: forking a process that already runs OpenCV's thread pool is not safe
         pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_worker_init, initargs=(target, options))
-    else:
-        detector = Detector(target, options)
+    # runs of consecutive frames, each tracked within itself (tracking.py): a worker takes whole
+    # runs; in this process they stream through a RunDetector (the same detections)
+    run_frames = run_length(target, options)
+    if pool is None:
+        detector = RunDetector(Detector(target, options), run_frames)
     pending: deque = deque()
+    run: list = []
+    max_pending = 2 * workers if run_frames == 1 else workers + 1  # runs in flight: bounded memory
+
+    def submit_run() -> None:
+        infos, images = [item[0] for item in run], [item[1] for item in run]
+        pending.append((infos, pool.submit(_worker_detect_run, images, [info[0] for info in infos])))
+        run.clear()
+
+    def record_run(item) -> None:
+        infos, future = item
+        for info, detection in zip(infos, future.result()):
+            record(info, detection)
+
     try:
         with Progress(progress, estimate, f"detecting {target.target_type}") as bar:
-            for frame in frames.frames(gray=True):
+            decoded = frames.frames(gray=True)
+            if pool is not None:  # decode while the workers detect; in-process, one frame at a time
+                decoded = _decoded_ahead(decoded, run_frames)
+            for frame in decoded:
                 state["total"] += 1
                 if frame.image is None:
                     dropped[frame.problem or "unreadable"] += 1
@@ -134,14 +156,18 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
                     continue
                 info = (frame.index, frame.time_s, frame.label)
                 if pool is None:
-                    record(info, detector.detect(frame.image))
+                    record(info, detector.detect(frame.image, frame.index))
                 else:
-                    pending.append((info, pool.submit(_worker_detect, frame.image)))
-                    while len(pending) > 2 * workers:  # bounded: memory independent of length
-                        record(*_result(pending.popleft()))
-                bar.update(state["total"] - len(pending))
+                    run.append((info, frame.image))
+                    if len(run) == run_frames:
+                        submit_run()
+                    while len(pending) > max_pending:
+                        record_run(pending.popleft())
+                bar.update(state["total"] - len(run) - run_frames * len(pending))
+            if run:
+                submit_run()
             while pending:
-                record(*_result(pending.popleft()))
+                record_run(pending.popleft())
             bar.update(state["total"])
     finally:
         if pool is not None:
@@ -161,6 +187,47 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
                            np.asarray(blur, dtype=np.float64), frames.timestamps_source, list(frames.warnings))
 
 
-def _result(item):
-    info, future = item
-    return info, future.result()
+def _decoded_ahead(frames: Iterator, depth: int) -> Iterator:
+    """The frames of an iterator, decoded in a thread up to `depth` frames ahead: OpenCV decodes
+    without holding the GIL, so decoding overlaps detection and shipping frames to workers."""
+    ready: queue.Queue = queue.Queue(maxsize=max(1, depth))
+    stop = threading.Event()
+    end = object()
+
+    def decode() -> None:
+        try:
+            for frame in frames:
+                while not stop.is_set():
+                    try:
+                        ready.put(frame, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            item = end
+        except BaseException as error:  # re-raised in the consumer (e.g. InputError: no frame)
+            item = error
+        finally:
+            if hasattr(frames, "close"):
+                frames.close()  # a generator stopped early releases its video capture here
+        while not stop.is_set():
+            try:
+                ready.put(item, timeout=0.1)
+                return
+            except queue.Full:
+                continue
+
+    thread = threading.Thread(target=decode, name="rscalib-decode", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item = ready.get()
+            if item is end:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        thread.join()
