@@ -1,15 +1,19 @@
 """Checkerboard detection speed with and without tracking (issue 17), and whether both agree.
 
-    .venv/bin/python benchmarks/bench_detection_speed.py [--sizes 640x480:60,1920x1080:20]
-        [--naive-frames 300] [--no-compare]
+    .venv/bin/python benchmarks/bench_detection_speed.py [--sizes 640x480:60:ffv1,1920x1080:20:ffv1+mp4v]
+        [--naive-frames 100] [--no-compare]
 
-Speed, per size (a rendered 9x6 checkerboard video, `rscalib simulate --supersample 1`, FFV1):
+Speed, per size and codec (a rendered 9x6 checkerboard video, `rscalib simulate --supersample 1`:
+FFV1, lossless and slow to decode; "mp4v": the same frames re-encoded as MPEG-4 Part 2 by
+OpenCV's writer, closer to the decode cost of a phone's H.264):
   (a) decode only: FrameSource.frames(gray=True), the reader detection uses;
   (b) the naive single-process loop: cv2.VideoCapture.read, grey, cv2.findChessboardCornersSB
       (on the first --naive-frames frames);
   (c) detect_video with full detection in every frame (DetectOptions(full_detection_every=1));
   (d) detect_video with tracking (the default, a full detection every 20 frames);
-  (c) and (d) on all usable cores, worker start-up included, no cache.
+  (c) and (d) on all usable cores, worker start-up included, no cache;
+  and, robust to other load on the machine, the CPU time per frame in one process (first 200
+  frames): decoding, full detection, tracked detection (time.process_time, all threads).
 Agreement (--compare, on by default): on rendered 640x480 videos (calm, hand-held and wild
 motion, and motion blur) and on a sequence made from a real photo (OpenCV's left01.jpg under a
 smoothly moving homography) and the 13 real stills as they are (no motion to track: every frame
@@ -35,7 +39,7 @@ import numpy as np
 
 from rscalib.detection.detectors import DetectOptions, Detector
 from rscalib.detection.pipeline import detect_video, usable_cores
-from rscalib.detection.tracking import CheckerboardTracker
+from rscalib.detection.tracking import CheckerboardTracker, RunDetector, run_length
 from rscalib.io.targets import load_target
 from rscalib.io.video import open_source
 
@@ -92,9 +96,45 @@ def rate(source, target, options) -> tuple[float, object]:
     return result.frames_total / (time.perf_counter() - started), result
 
 
-def speed_row(folder: Path, naive_frames: int) -> dict:
+def mpeg4(folder: Path) -> Path:
+    """The render re-encoded as MPEG-4 Part 2 (OpenCV's "mp4v" writer; cached)."""
+    out = folder / "video_mp4v.mp4"
+    if not out.is_file():
+        capture = cv2.VideoCapture(str(folder / "video.avi"), cv2.CAP_FFMPEG)
+        writer = None
+        while True:
+            ok, image = capture.read()
+            if not ok:
+                break
+            gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+            if writer is None:
+                writer = cv2.VideoWriter(str(out), cv2.CAP_FFMPEG, cv2.VideoWriter_fourcc(*"mp4v"), 30.0,
+                                         gray.shape[::-1], False)
+            writer.write(gray)
+        writer.release()
+        capture.release()
+    return out
+
+
+def cpu_ms_per_frame(video: Path, target, frames: int = 200) -> dict:
+    """CPU time per frame in this process (all its threads): decode, full, tracked detection."""
+    started, images = time.process_time(), []
+    for frame in open_source(video).frames(gray=True):
+        images.append((frame.index, frame.image))
+        if len(images) == frames:
+            break
+    row = {"cpu_decode_ms": (time.process_time() - started) * 1e3 / len(images)}
+    for name, options in (("full", FULL), ("tracked", TRACKED)):
+        runs = RunDetector(Detector(target, options), run_length(target, options))
+        started = time.process_time()
+        for index, image in images:
+            runs.detect(image, index)
+        row[f"cpu_{name}_ms"] = (time.process_time() - started) * 1e3 / len(images)
+    return row
+
+
+def speed_row(folder: Path, video: Path, naive_frames: int) -> dict:
     target = load_target(folder / "target.yaml")
-    video = folder / "video.avi"
     started = time.perf_counter()
     decoded = sum(1 for _ in open_source(video).frames(gray=True))
     decode_fps = decoded / (time.perf_counter() - started)
@@ -118,7 +158,7 @@ def speed_row(folder: Path, naive_frames: int) -> dict:
     return {"size": f"{width}x{height}", "frames": decoded, "decode_fps": decode_fps, "naive_fps": naive_fps,
             "naive_frames": naive, "naive_found": found, "full_fps": full_fps, "tracked_fps": tracked_fps,
             "full_accepted": full.frames_detected, "tracked_accepted": tracked.frames_detected,
-            "workers": usable_cores(), **agreement(full, tracked, folder)}
+            "workers": usable_cores(), **cpu_ms_per_frame(video, target), **agreement(full, tracked, folder)}
 
 
 def per_frame(result) -> dict:
@@ -172,8 +212,9 @@ def compare_row(name: str, source, folder: Path, target) -> dict:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", default="640x480:60,1920x1080:20", help="WxH:seconds of video per size")
-    parser.add_argument("--naive-frames", type=int, default=300, help="frames timed in the naive loop (300)")
+    parser.add_argument("--sizes", default="640x480:60:ffv1,1920x1080:20:ffv1+mp4v",
+                        help="WxH:seconds:codecs per size (codecs ffv1 and/or mp4v, joined by +)")
+    parser.add_argument("--naive-frames", type=int, default=100, help="frames timed in the naive loop (100)")
     parser.add_argument("--no-compare", action="store_true", help="skip the agreement cases")
     parser.add_argument("--videos", type=Path, default=Path("/tmp/rscalib_speed_videos"))
     parser.add_argument("--out", type=Path, default=RESULTS)
@@ -181,14 +222,14 @@ def main() -> int:
     info = _common.machine_info(usable_cores=usable_cores(), opencv=cv2.__version__)
     speed, compare = [], []
     for seed, item in enumerate(args.sizes.split(","), start=1):
-        size, seconds = item.split(":")
+        size, seconds, codecs = item.split(":")
         folder = render(args.videos / f"speed_{size}_{seconds}s", ["--size", size, "--duration", seconds,
                                                                     "--seed", str(seed)])
-        row = speed_row(folder, args.naive_frames)
-        speed.append(row)
-        print(f"{row['size']:>9s} {row['frames']} frames: decode {row['decode_fps']:.0f} /s, naive "
-              f"{row['naive_fps']:.1f} /s, full {row['full_fps']:.1f} /s, tracked {row['tracked_fps']:.1f} /s; "
-              f"diff median {row['diff_median_px']:.4f} px, p99 {row['diff_p99_px']:.4f} px", flush=True)
+        for codec in codecs.split("+"):
+            video = folder / "video.avi" if codec == "ffv1" else mpeg4(folder)
+            row = {"codec": codec, **speed_row(folder, video, args.naive_frames)}
+            speed.append(row)
+            print(row, flush=True)
     if not args.no_compare:
         cases = [(name, render(args.videos / RENDER_DIRS[name], extra)) for name, extra in COMPARE_RENDERS.items()]
         for name, folder in cases:
@@ -204,11 +245,14 @@ def main() -> int:
             print(compare[-1], flush=True)
     info["load_average_1min_at_end"] = os.getloadavg()[0]
 
-    lines = ["| size | frames | (a) decode only | (b) naive loop, 1 process | (c) detect_video, full | "
-             "(d) detect_video, tracked | (d)/(c) | accepted (c) / (d) |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
-    lines += [f"| {r['size']} | {r['frames']} | {r['decode_fps']:.0f} | {r['naive_fps']:.1f} | {r['full_fps']:.1f} | "
-              f"{r['tracked_fps']:.1f} | {r['tracked_fps'] / r['full_fps']:.2f} | "
-              f"{r['full_accepted']} / {r['tracked_accepted']} |" for r in speed]
+    lines = ["| size, codec | frames | (a) decode only | (b) naive loop, 1 process | (c) detect_video, full | "
+             "(d) detect_video, tracked | (d)/(c) | CPU ms/frame: decode, full, tracked | accepted (c) / (d) | "
+             "diff median / p99 (px) |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines += [f"| {r['size']} {r['codec']} | {r['frames']} | {r['decode_fps']:.0f} | {r['naive_fps']:.1f} | "
+              f"{r['full_fps']:.1f} | {r['tracked_fps']:.1f} | {r['tracked_fps'] / r['full_fps']:.2f} | "
+              f"{r['cpu_decode_ms']:.1f}, {r['cpu_full_ms']:.1f}, {r['cpu_tracked_ms']:.1f} | "
+              f"{r['full_accepted']} / {r['tracked_accepted']} | {r['diff_median_px']:.4f} / {r['diff_p99_px']:.4f} |"
+              for r in speed]
     lines += ["", "| case | frames | accepted full / tracked | tracked frames | diff median (px) | diff p99 | diff max | "
               "error vs truth, median full / tracked (px) |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in compare:

@@ -9,7 +9,7 @@ the detector's own refinement and checks follow (Detector.refine_checkerboard: c
 with the full detection's window, ids, blur, local geometry, here with a stricter residual
 bound). The track is then verified:
 
-- the board with its ring of outer squares lies inside the image (prediction, before refining);
+- every predicted corner lies 0.4 grid steps inside the image (else the board nears the border);
 - no corner moved further than 0.45 grid steps from its prediction (a neighbour is one step away);
 - every corner is a saddle: its diagonal quadrants are bright, the others dark, or the reverse,
   alternating over the grid (a square's outer corner, an occluder or a lost grid fails).
@@ -134,18 +134,14 @@ class CheckerboardTracker:
         self._history = (self._history + [(index, found.uv)])[-2:]
 
     def _inside(self, uv: np.ndarray, shape: tuple) -> bool:
-        """Whether the corners and the outer ring of squares (one grid step beyond) lie inside the
-        image with a margin of the refinement's reach."""
-        rows, cols = self.grid_shape
-        grid = uv.reshape(rows, cols, 2)
-        ring = np.concatenate([2 * grid[0] - grid[1], 2 * grid[-1] - grid[-2],
-                               2 * grid[:, 0] - grid[:, 1], 2 * grid[:, -1] - grid[:, -2]])
-        margin = 2.0
+        """Whether every corner lies 0.4 grid steps (and 2 px) inside the image: the refinement
+        windows and the saddle samples stay on the image."""
+        margin = 2.0 + WIDE_WINDOW_STEPS * _min_step(uv.reshape(*self.grid_shape, 2))
         height, width = shape[:2]
-        if not np.all(np.isfinite(ring)):
+        if not np.all(np.isfinite(uv)):
             return False
-        return bool(ring[:, 0].min() >= margin and ring[:, 1].min() >= margin
-                    and ring[:, 0].max() <= width - 1 - margin and ring[:, 1].max() <= height - 1 - margin)
+        return bool(uv[:, 0].min() >= margin and uv[:, 1].min() >= margin
+                    and uv[:, 0].max() <= width - 1 - margin and uv[:, 1].max() <= height - 1 - margin)
 
     def _verified(self, gray: np.ndarray, predicted: np.ndarray, uv: np.ndarray) -> bool:
         rows, cols = self.grid_shape
