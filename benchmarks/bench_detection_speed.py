@@ -66,14 +66,14 @@ def render(folder: Path, args: list) -> Path:
     return folder
 
 
-def real_photo_sequence(folder: Path, frames: int = 150) -> Path:
+def real_photo_sequence(folder: Path, data: Path, frames: int = 150) -> Path:
     """A video of OpenCV's real left01.jpg under a smooth homography (rotation, shift, zoom):
     real texture, noise and JPEG blocks with known inter-frame motion; no truth file."""
     video = folder / "video.avi"
     if video.is_file():
         return folder
     folder.mkdir(parents=True, exist_ok=True)
-    photo = cv2.imread(str(DATA / "opencv_stereo_chessboard" / "left01.jpg"), cv2.IMREAD_GRAYSCALE)
+    photo = cv2.imread(str(data / "opencv_stereo_chessboard" / "left01.jpg"), cv2.IMREAD_GRAYSCALE)
     height, width = photo.shape
     writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"FFV1"), 30.0, (width, height), False)
     for k in range(frames):
@@ -216,12 +216,14 @@ def main() -> int:
                         help="WxH:seconds:codecs per size (codecs ffv1 and/or mp4v, joined by +)")
     parser.add_argument("--naive-frames", type=int, default=100, help="frames timed in the naive loop (100)")
     parser.add_argument("--no-compare", action="store_true", help="skip the agreement cases")
+    parser.add_argument("--no-speed", action="store_true", help="only the agreement cases")
+    parser.add_argument("--data", type=Path, default=DATA, help="the shared real data (../shared/data)")
     parser.add_argument("--videos", type=Path, default=Path("/tmp/rscalib_speed_videos"))
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args()
     info = _common.machine_info(usable_cores=usable_cores(), opencv=cv2.__version__)
     speed, compare = [], []
-    for seed, item in enumerate(args.sizes.split(","), start=1):
+    for seed, item in enumerate([] if args.no_speed else args.sizes.split(","), start=1):
         size, seconds, codecs = item.split(":")
         folder = render(args.videos / f"speed_{size}_{seconds}s", ["--size", size, "--duration", seconds,
                                                                     "--seed", str(seed)])
@@ -235,12 +237,12 @@ def main() -> int:
         for name, folder in cases:
             compare.append(compare_row(name, folder / "video.avi", folder, load_target(folder / "target.yaml")))
             print(compare[-1], flush=True)
-        if DATA.is_dir():
-            folder = real_photo_sequence(args.videos / "real_left01_warped")
+        if args.data.is_dir():
+            folder = real_photo_sequence(args.videos / "real_left01_warped", args.data)
             target = load_target(folder / "target.yaml")
             compare.append(compare_row("real photo, moving (left01.jpg warped)", folder / "video.avi", folder, target))
             print(compare[-1], flush=True)
-            stills = sorted((DATA / "opencv_stereo_chessboard").glob("left*.jpg"))
+            stills = sorted((args.data / "opencv_stereo_chessboard").glob("left*.jpg"))
             compare.append(compare_row("real stills (13, unrelated views)", stills, args.videos, target))
             print(compare[-1], flush=True)
     info["load_average_1min_at_end"] = os.getloadavg()[0]

@@ -94,7 +94,7 @@ class CheckerboardTracker:
         if predicted is not None:
             # a wide first pass pulls the prediction (a few px off) onto the corners; the
             # detector's own refinement then runs exactly as after a full detection
-            half_window = int(np.clip(round(WIDE_WINDOW_STEPS * _min_step(predicted.reshape(*self.grid_shape, 2))), 2, 25))
+            half_window = int(np.clip(round(WIDE_WINDOW_STEPS * _min_step(predicted.reshape(*self.grid_shape, 2))), 2, 60))
             criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.05)
             coarse = cv2.cornerSubPix(gray, predicted.astype(np.float32).reshape(-1, 1, 2), (half_window, half_window),
                                       (-1, -1), criteria).reshape(-1, 2).astype(np.float64)
