@@ -194,16 +194,20 @@ def _decoded_ahead(frames: Iterator, depth: int) -> Iterator:
     stop = threading.Event()
     end = object()
 
+    def put(item) -> bool:
+        """Queue an item unless the consumer has stopped (then False)."""
+        while not stop.is_set():
+            try:
+                ready.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
     def decode() -> None:
         try:
             for frame in frames:
-                while not stop.is_set():
-                    try:
-                        ready.put(frame, timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
+                if not put(frame):
                     return
             item = end
         except BaseException as error:  # re-raised in the consumer (e.g. InputError: no frame)
@@ -211,12 +215,7 @@ def _decoded_ahead(frames: Iterator, depth: int) -> Iterator:
         finally:
             if hasattr(frames, "close"):
                 frames.close()  # a generator stopped early releases its video capture here
-        while not stop.is_set():
-            try:
-                ready.put(item, timeout=0.1)
-                return
-            except queue.Full:
-                continue
+        put(item)
 
     thread = threading.Thread(target=decode, name="rscalib-decode", daemon=True)
     thread.start()
