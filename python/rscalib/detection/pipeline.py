@@ -40,8 +40,9 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
     timestamps.txt) or a list of image files.
 
     workers: processes (default: the usable cores; in this process for under 64 frames). The
-    video is decoded here and streamed to the workers with a bounded queue, so memory does not
-    grow with its length. Workers are spawned (not forked), so a calling script needs the usual
+    video is decoded here, in a thread, and streamed to the workers in runs of consecutive
+    frames (checkerboards are tracked within a run: tracking.py) with a bounded queue, so memory
+    does not grow with its length; the result does not depend on the number of workers. Workers are spawned (not forked), so a calling script needs the usual
     `if __name__ == "__main__":` guard.
     cache: reuse / store the result under cache_dir (default_cache_dir()), keyed by the hash of
     the source's bytes, the target definition, the options and DETECTOR_VERSION."""
