@@ -58,7 +58,7 @@ def _range_words(low, high, low_open: bool) -> str:
 
 def workers(text: str) -> int:
     """Processes or threads: 1 to the usable cores (more only share the cores, and each costs memory)."""
-    from ..detection.pipeline import usable_cores
+    from ..io.limits import usable_cores
 
     cores = usable_cores()
     return whole(1, cores, why=f" (this machine has {cores} usable cores)")(text)

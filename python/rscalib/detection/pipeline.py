@@ -6,31 +6,28 @@ import contextlib
 import ctypes
 import hashlib
 import os
+import queue
 import signal
 import sys
+import threading
 import time
 from collections import deque
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import Optional, Sequence, Union
+from typing import Iterator, Optional, Sequence, Union
 
 import cv2
 import numpy as np
 
 from .._progress import Progress
+from ..io.limits import bounded_workers, usable_cores
 from ..io.targets import Target, load_target
 from ..io.video import FrameSource, open_source
 from ..observations import Observations
 from .cache import default_cache_dir, load_cache, save_cache
 from .detectors import DETECTOR_VERSION, DROP_REASONS, DetectOptions, Detector, FrameDetection
 from .result import DetectionResult
-
-
-def usable_cores() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not Linux
-        return max(1, os.cpu_count() or 1)
+from .tracking import RunDetector, detect_run, run_length
 
 
 def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, Path], *,
@@ -40,8 +37,9 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
     timestamps.txt) or a list of image files.
 
     workers: processes (default: the usable cores; in this process for under 64 frames). The
-    video is decoded here and streamed to the workers with a bounded queue, so memory does not
-    grow with its length. Workers are spawned (not forked), so a calling script needs the usual
+    video is decoded here, in a thread, and streamed to the workers in runs of consecutive
+    frames (checkerboards are tracked within a run: tracking.py) with a bounded queue, so memory
+    does not grow with its length; the result does not depend on the number of workers. Workers are spawned (not forked), so a calling script needs the usual
     `if __name__ == "__main__":` guard.
     cache: reuse / store the result under cache_dir (default_cache_dir()), keyed by the hash of
     the source's bytes, the target definition, the options and DETECTOR_VERSION."""
@@ -49,6 +47,7 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
         target = load_target(target)
     options = options or DetectOptions()
     frames = open_source(source)
+    workers = bounded_workers(frames, workers)  # frame sizes from the headers: refused or bounded before decoding
     started = time.perf_counter()
     cache_file = None
     cache_problems: list = []   # a bad cache file: one line each, reported with the result
@@ -117,8 +116,8 @@ def _sigint_blocked():
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
-def _worker_detect(image: np.ndarray) -> FrameDetection:
-    return _WORKER_DETECTOR.detect(image)
+def _worker_detect_run(images: list, indices: list) -> list:
+    return detect_run(_WORKER_DETECTOR, images, indices)
 
 
 def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, workers: Optional[int],
@@ -155,12 +154,32 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
         # spawn: forking a process that already runs OpenCV's thread pool is not safe
         pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_worker_init, initargs=(target, options, os.getpid()))
-    else:
-        detector = Detector(target, options)
+    # runs of consecutive frames, each tracked within itself (tracking.py): a worker takes whole
+    # runs; in this process they stream through a RunDetector (the same detections)
+    run_frames = run_length(target, options)
+    if pool is None:
+        detector = RunDetector(Detector(target, options), run_frames)
     pending: deque = deque()
+    run: list = []
+    max_pending = 2 * workers if run_frames == 1 else workers + 1  # runs in flight: bounded memory
+
+    def submit_run() -> None:
+        infos, images = [item[0] for item in run], [item[1] for item in run]
+        with _sigint_blocked():   # a worker spawned here starts with Ctrl-C blocked (see _worker_init)
+            pending.append((infos, pool.submit(_worker_detect_run, images, [info[0] for info in infos])))
+        run.clear()
+
+    def record_run(item) -> None:
+        infos, future = item
+        for info, detection in zip(infos, future.result()):
+            record(info, detection)
+
     try:
         with Progress(progress, estimate, f"detecting {target.target_type}") as bar:
-            for frame in frames.frames(gray=True):
+            decoded = frames.frames(gray=True)
+            if pool is not None:  # decode while the workers detect; in-process, one frame at a time
+                decoded = _decoded_ahead(decoded, run_frames)
+            for frame in decoded:
                 state["total"] += 1
                 if frame.image is None:
                     dropped[frame.problem or "unreadable"] += 1
@@ -173,15 +192,18 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
                     continue
                 info = (frame.index, frame.time_s, frame.label)
                 if pool is None:
-                    record(info, detector.detect(frame.image))
+                    record(info, detector.detect(frame.image, frame.index))
                 else:
-                    with _sigint_blocked():   # a worker spawned here starts with Ctrl-C blocked (see _worker_init)
-                        pending.append((info, pool.submit(_worker_detect, frame.image)))
-                    while len(pending) > 2 * workers:  # bounded: memory independent of length
-                        record(*_result(pending.popleft()))
-                bar.update(state["total"] - len(pending))
+                    run.append((info, frame.image))
+                    if len(run) == run_frames:
+                        submit_run()
+                    while len(pending) > max_pending:
+                        record_run(pending.popleft())
+                bar.update(state["total"] - len(run) - run_frames * len(pending))
+            if run:
+                submit_run()
             while pending:
-                record(*_result(pending.popleft()))
+                record_run(pending.popleft())
             bar.update(state["total"])
     except BaseException:
         if pool is not None:  # interrupted (Ctrl-C, SIGTERM) or failed: stop the workers now, not after their frames
@@ -220,6 +242,46 @@ def stop_workers(pool, timeout_s: float = 2.0) -> None:
             process.join(1.0)
 
 
-def _result(item):
-    info, future = item
-    return info, future.result()
+def _decoded_ahead(frames: Iterator, depth: int) -> Iterator:
+    """The frames of an iterator, decoded in a thread up to `depth` frames ahead: OpenCV decodes
+    without holding the GIL, so decoding overlaps detection and shipping frames to workers."""
+    ready: queue.Queue = queue.Queue(maxsize=max(1, depth))
+    stop = threading.Event()
+    end = object()
+
+    def put(item) -> bool:
+        """Queue an item unless the consumer has stopped (then False)."""
+        while not stop.is_set():
+            try:
+                ready.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def decode() -> None:
+        try:
+            for frame in frames:
+                if not put(frame):
+                    return
+            item = end
+        except BaseException as error:  # re-raised in the consumer (e.g. InputError: no frame)
+            item = error
+        finally:
+            if hasattr(frames, "close"):
+                frames.close()  # a generator stopped early releases its video capture here
+        put(item)
+
+    thread = threading.Thread(target=decode, name="rscalib-decode", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item = ready.get()
+            if item is end:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        thread.join()

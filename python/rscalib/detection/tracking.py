@@ -1,0 +1,178 @@
+"""Checkerboard tracking between full detections: predict, refine, verify, else detect again.
+
+A video is cut into runs of `DetectOptions.full_detection_every` consecutive frames (run_length).
+The first frame of a run is detected from scratch (Detector.detect). Each later frame is
+predicted from the two accepted frames before it: the image-to-image homography of the last
+step applied once more (constant velocity), or the last corners if only one frame is known.
+A wide cornerSubPix pass (half-window 0.4 grid steps) pulls the prediction onto the corners;
+the detector's own refinement and checks follow (Detector.refine_checkerboard: cornerSubPix
+with the full detection's window, ids, blur, local geometry, here with a stricter residual
+bound). The track is then verified:
+
+- every predicted corner lies 0.4 grid steps inside the image (else the board nears the border);
+- no corner moved further than 0.45 grid steps from its prediction (a neighbour is one step away);
+- every corner is a saddle: its diagonal quadrants are bright, the others dark, or the reverse,
+  alternating over the grid (a square's outer corner, an occluder or a lost grid fails).
+
+A frame failing any of these is detected from scratch. Runs are independent of each other, so
+worker processes take whole runs and the result does not depend on the number of workers.
+Other target types are detected from scratch in every frame (docs/benchmarks.md, issue 17).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Optional, Sequence
+
+import cv2
+import numpy as np
+
+from ..io.targets import Target
+from .detectors import DetectOptions, Detector, FrameDetection, grid_reindexings
+
+TRACKED_TARGETS = ("checkerboard",)
+MAX_SHIFT_STEPS = 0.45  # largest refinement shift from the prediction, in grid steps
+MIN_CONTRAST = 20.0     # grey levels between the bright and the dark quadrants of a corner (median)
+MIN_SADDLE_GAP = 0.25   # darker bright quadrant minus brighter dark quadrant, in units of that contrast
+MAX_TRACK_RESIDUAL = 0.1  # local-homography residual of a tracked corner, grid steps (good ones: < 0.02)
+WIDE_WINDOW_STEPS = 0.4   # first sub-pixel pass from the prediction: half-window in grid steps
+
+
+def run_length(target: Target, options: DetectOptions) -> int:
+    """Frames per independently processed run: full_detection_every for tracked targets, else 1."""
+    if target.target_type in TRACKED_TARGETS and options.full_detection_every > 1:
+        return int(options.full_detection_every)
+    return 1
+
+
+def detect_run(detector: Detector, images: Sequence[np.ndarray], indices: Sequence[int]) -> list[FrameDetection]:
+    """Detections in one run of frames (grey images and their indices in the source, in order):
+    full detection on the first, tracking on the rest where the target allows it."""
+    runs = RunDetector(detector, len(images))
+    return [runs.detect(image, index) for image, index in zip(images, indices)]
+
+
+class RunDetector:
+    """Frames one at a time, in order, cut into runs of run_frames: a fresh tracker for each run
+    (the same detections as detect_run on each run), full detection for untracked targets."""
+
+    def __init__(self, detector: Detector, run_frames: int):
+        self.detector = detector
+        self.run_frames = max(1, int(run_frames))
+        self.tracked = detector.target.target_type in TRACKED_TARGETS
+        self._seen = 0
+        self._tracker: Optional[CheckerboardTracker] = None
+
+    def detect(self, image: np.ndarray, index: int) -> FrameDetection:
+        if not self.tracked:
+            return self.detector.detect(image)
+        if self._seen % self.run_frames == 0:
+            self._tracker = CheckerboardTracker(self.detector)
+        self._seen += 1
+        return self._tracker.detect(image, index)
+
+
+class CheckerboardTracker:
+    """Sequential per-frame checkerboard detection that tracks the last accepted corners.
+
+    counts: frames detected from scratch ("full"), tracked ("tracked"), and tracks that failed a
+    check and were detected from scratch instead ("track_rejected", also counted in "full")."""
+
+    def __init__(self, detector: Detector):
+        self.detector = detector
+        # tracked corners: a stricter geometry check; the saddle check below replaces the outer
+        # ring's (it samples the ring's squares next to the edge corners, and a track cannot
+        # slip by a row: every corner stays within MAX_SHIFT_STEPS of its prediction)
+        self._refiner = Detector(detector.target, replace(detector.options, max_residual=MAX_TRACK_RESIDUAL,
+                                                          check_outer_ring=False))
+        self.grid_shape = detector.target.grid_shape
+        self._reindexings = grid_reindexings(self.grid_shape)
+        self._history: list[tuple[int, np.ndarray]] = []  # (index, uv) of the last accepted frames
+        self.counts = {"full": 0, "tracked": 0, "track_rejected": 0}
+
+    def detect(self, gray: np.ndarray, index: int) -> FrameDetection:
+        predicted = self.predict(index, gray.shape)
+        if predicted is not None:
+            # a wide first pass pulls the prediction (a few px off) onto the corners; the
+            # detector's own refinement then runs exactly as after a full detection
+            half_window = int(np.clip(round(WIDE_WINDOW_STEPS * _min_step(predicted.reshape(*self.grid_shape, 2))), 2, 60))
+            criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.05)
+            coarse = cv2.cornerSubPix(gray, predicted.astype(np.float32).reshape(-1, 1, 2), (half_window, half_window),
+                                      (-1, -1), criteria).reshape(-1, 2).astype(np.float64)
+            found = self._refiner.refine_checkerboard(gray, coarse)
+            if found.accepted and self._verified(gray, predicted, found.uv):
+                self.counts["tracked"] += 1
+                self._remember(index, found)
+                return found
+            self.counts["track_rejected"] += 1
+        self.counts["full"] += 1
+        found = self.detector.detect(gray)
+        self._remember(index, found)
+        return found
+
+    def predict(self, index: int, shape: tuple) -> Optional[np.ndarray]:
+        """Predicted corners of frame `index` (numbered as the last frame's), or None when there is
+        no track (no accepted previous frame) or the board would near the image border."""
+        if not self._history or self._history[-1][0] != index - 1:
+            return None
+        last = self._history[-1][1]
+        predicted = last
+        if len(self._history) == 2:
+            before = self._history[0][1]
+            # symmetric boards may be numbered differently in the two frames: match the numbering
+            before = min((before[p] for p in self._reindexings), key=lambda uv: float(np.sum((uv - last) ** 2)))
+            step, _ = cv2.findHomography(before, last, 0)
+            if step is not None and np.all(np.isfinite(step)):
+                predicted = cv2.perspectiveTransform(last.reshape(-1, 1, 2), step).reshape(-1, 2)
+        return predicted if self._inside(predicted, shape) else None
+
+    def _remember(self, index: int, found: FrameDetection) -> None:
+        if not found.accepted:
+            self._history = []
+            return
+        if self._history and self._history[-1][0] != index - 1:
+            self._history = []
+        self._history = (self._history + [(index, found.uv)])[-2:]
+
+    def _inside(self, uv: np.ndarray, shape: tuple) -> bool:
+        """Whether every corner lies 0.4 grid steps (and 2 px) inside the image: the refinement
+        windows and the saddle samples stay on the image."""
+        margin = 2.0 + WIDE_WINDOW_STEPS * _min_step(uv.reshape(*self.grid_shape, 2))
+        height, width = shape[:2]
+        if not np.all(np.isfinite(uv)):
+            return False
+        return bool(uv[:, 0].min() >= margin and uv[:, 1].min() >= margin
+                    and uv[:, 0].max() <= width - 1 - margin and uv[:, 1].max() <= height - 1 - margin)
+
+    def _verified(self, gray: np.ndarray, predicted: np.ndarray, uv: np.ndarray) -> bool:
+        rows, cols = self.grid_shape
+        grid = uv.reshape(rows, cols, 2)
+        # refined corners may be renumbered (ids): compare each with its nearest prediction
+        shift = np.linalg.norm(uv[:, None, :] - predicted[None, :, :], axis=2).min(axis=1)
+        if shift.max() > MAX_SHIFT_STEPS * _min_step(grid):
+            return False
+        return corners_are_saddles(gray, grid)
+
+
+def corners_are_saddles(gray: np.ndarray, grid: np.ndarray) -> bool:
+    """Whether every corner of a (rows, cols, 2) grid is a checkerboard saddle: of the four points
+    0.3 grid steps away along the diagonals, one diagonal pair is brighter than the other by a
+    clear gap, and which pair is bright alternates from corner to corner. A corner of a single
+    square at the board's edge (three bright quadrants) or an occluded corner fails."""
+    along_cols, along_rows = np.gradient(grid, axis=1), np.gradient(grid, axis=0)
+    offsets = [along_cols + along_rows, -(along_cols + along_rows), along_cols - along_rows, along_rows - along_cols]
+    points = np.stack([grid + 0.3 * o for o in offsets], axis=2).reshape(-1, 4, 2).astype(np.float32)
+    values = cv2.remap(gray, points[..., 0], points[..., 1], cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE).astype(np.float64)  # (n, 4)
+    diagonal_bright = values[:, :2].min(1) - values[:, 2:].max(1)   # gap if the diagonal pair is bright
+    anti_bright = values[:, 2:].min(1) - values[:, :2].max(1)
+    even = (np.add.outer(np.arange(grid.shape[0]), np.arange(grid.shape[1])) % 2 == 0).ravel()
+    gap = max(np.where(even, diagonal_bright, anti_bright), np.where(even, anti_bright, diagonal_bright),
+              key=np.median)  # the board's colour convention is the one most corners follow
+    contrast = float(np.median(values.max(1) - values.min(1)))
+    return contrast >= MIN_CONTRAST and float(gap.min()) >= MIN_SADDLE_GAP * contrast
+
+
+def _min_step(grid: np.ndarray) -> float:
+    steps = np.concatenate([np.linalg.norm(np.diff(grid, axis=1), axis=2).ravel(),
+                            np.linalg.norm(np.diff(grid, axis=0), axis=2).ravel()])
+    return float(steps.min())
