@@ -134,8 +134,8 @@ def test_no_report_writes_the_result_and_no_plots(problem, tmp_path):
     _, camera, result, _ = problem
     seen = []
 
-    def on_result(summary):
-        seen.append(sorted(p.name for p in tmp_path.iterdir()))
+    def on_result(summary):  # result.json exists by then, in the run's staging folder (io.output_folder)
+        seen.append(sorted(p.name for p in tmp_path.rglob("*")))
 
     summary = report.write_outputs(result, camera, tmp_path, report=False, on_result=on_result)
     names = {p.name for p in tmp_path.iterdir()}
@@ -149,11 +149,16 @@ def test_no_report_writes_the_result_and_no_plots(problem, tmp_path):
 
 def test_the_result_is_out_before_the_plots_are_drawn(problem, tmp_path):
     _, camera, result, _ = problem
-    seen = []
-    summary = report.write_outputs(result, camera, tmp_path,
-                                   on_result=lambda s: seen.append(sorted(p.name for p in tmp_path.iterdir())))
-    assert len(seen) == 1 and "result.json" in seen[0]
+    seen, top = [], []
+
+    def on_result(summary):
+        seen.append(sorted(p.name for p in tmp_path.rglob("*")))
+        top.append((tmp_path / "result.json").exists())
+
+    summary = report.write_outputs(result, camera, tmp_path, on_result=on_result)
+    assert len(seen) == 1 and "result.json" in seen[0]   # written (staged), the plots not yet drawn
     assert not any(n.endswith(".png") for n in seen[0]) and "report.html" not in seen[0]
+    assert top == [False]   # the folder's files appear as one set, result.json last (io.output_folder)
     # afterwards the report is complete, and result.json lists what is there
     written = json.loads((tmp_path / "result.json").read_text())
     assert written["files"]["plots"] == summary["files"]["plots"]
