@@ -26,8 +26,10 @@ from ..errors import InputError
 
 __all__ = ["FrameSearch", "MeasurementSource", "OUT_OF_VIEW_FRAMES", "SelfCalibHistory", "run_bank"]
 
-# A feature not predicted inside the image for this many frames is deleted (MonoSLAM and Civera et
-# al. keep a map of what is in view; a feature that left it only grows the state until the cap).
+# Frames after which a feature not predicted inside the image may be deleted (run_bank's
+# out_of_view_frames). Off by default: the bank's cap (SogOptions.max_features) already bounds the map
+# and deletes the features not searched, oldest first; deleting them earlier lost the features a walk
+# sees again, and the README's room walk then ended with 2 Gaussians instead of 1.
 OUT_OF_VIEW_FRAMES = 60
 
 
@@ -103,7 +105,7 @@ class SelfCalibHistory:
 
 def run_bank(bank: _core.SogBank, frames: Iterable[tuple[float, Any]], source: MeasurementSource, *,
              min_visible: int = 20, max_new_per_frame: int = 10, max_frames: Optional[int] = None,
-             out_of_view_frames: Optional[int] = OUT_OF_VIEW_FRAMES,
+             out_of_view_frames: Optional[int] = None,
              on_frame: Optional[Callable[[int, _core.SogBank, _core.SogUpdateReport], None]] = None
              ) -> SelfCalibHistory:
     """Run ``bank`` over ``frames``, pairs (time in s, frame) with increasing times; a frame of None
