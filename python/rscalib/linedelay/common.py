@@ -54,6 +54,23 @@ def check_segment_count(num_segments: Optional[int], frames: int) -> None:
                          f"(at most {MAX_SEGMENTS_PER_FRAME} a frame)")
 
 
+# Peak memory of a solve per observed corner (Jacobian blocks, Ceres' workspace, the normal equations),
+# measured 2.2 kB with the grouped analytic cost and 4 kB with one autodiff block per corner (robust
+# loss, --refine-intrinsics): docs/benchmarks.md "Peak memory against input size"; rounded up.
+SOLVE_BYTES_PER_OBSERVATION = 6_000
+SOLVE_BASE_BYTES = 300 * 2**20
+
+
+def check_solve_memory(num_observations: int) -> None:
+    """InputError (with the numbers) when a solve over ``num_observations`` corners would not fit in
+    the memory available: memory grows linearly with the video, so a long one is refused up front."""
+    from ..io.limits import check_memory
+
+    check_memory(SOLVE_BASE_BYTES + SOLVE_BYTES_PER_OBSERVATION * int(num_observations),
+                 f"the line-delay solve of {int(num_observations):,} observed corners (shorten the video with "
+                 "--start/--end)")
+
+
 def require_frame_times(timestamps_source: str, source) -> None:
     """InputError when the frames have no times (an image folder without timestamps.txt, a video
     with neither frame times nor a frame rate): the line delay and the trajectory are measured in

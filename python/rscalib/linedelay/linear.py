@@ -27,6 +27,7 @@ from ..errors import InputError
 from ..observations import Observations
 from .common import (
     assess_noise_and_determinacy,
+    check_solve_memory,
     choose_pixel_sigma,
     initial_values,
     seed_poses,
@@ -156,6 +157,7 @@ def calibrate_line_delay_linear(observations: Observations, camera: CameraModel,
     initial_d = d
 
     frames_total = observations.num_frames
+    check_solve_memory(len(observations.uv))
     used, gs = seed_poses(observations, camera, warnings, min_frames=2)
     sigma, sigma_source = choose_pixel_sigma(used, pixel_sigma)
 

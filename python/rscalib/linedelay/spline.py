@@ -23,6 +23,7 @@ from .common import (
     IntrinsicsPrior,
     assess_noise_and_determinacy,
     check_segment_count,
+    check_solve_memory,
     choose_pixel_sigma,
     default_intrinsics_prior,
     initial_values,
@@ -261,6 +262,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         min_segment_s = min(0.5 / fps, 1.0 / 60.0)
 
     frames_total = observations.num_frames
+    check_solve_memory(len(observations.uv))
     used, used_poses = seed_poses(observations, camera, warnings, min_frames=4)
     sigma, sigma_source = choose_pixel_sigma(used, pixel_sigma)
 

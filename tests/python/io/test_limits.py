@@ -97,3 +97,13 @@ def test_bounded_workers_refuses_a_huge_source_before_decoding(tmp_path, monkeyp
     cv2.imwrite(str(small / "a.png"), np.zeros((48, 64), np.uint8))
     assert limits.bounded_workers(open_source(small), 64) == 2
     assert limits.bounded_workers(open_source(small), None) is None
+
+
+def test_a_line_delay_solve_too_big_for_memory_is_refused_with_the_numbers(monkeypatch):
+    from rscalib.linedelay.common import SOLVE_BYTES_PER_OBSERVATION, check_solve_memory
+
+    monkeypatch.setattr(limits, "available_memory_bytes", lambda: (8 * 2**30, "test"))
+    check_solve_memory(100_000)   # a minute of 30 fps video of a 9x6 board: fits
+    too_many = int(8 * 2**30 / SOLVE_BYTES_PER_OBSERVATION) + 1
+    with pytest.raises(InputError, match=f"{too_many:,} observed corners.*--start/--end"):
+        check_solve_memory(too_many)
