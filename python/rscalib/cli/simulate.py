@@ -13,6 +13,9 @@ from .common import EXIT_OK, image_size, number, seconds_in, seed, whole, worker
 MAX_DURATION_S = 3600.0
 
 
+DEFAULT_SIZE = "640x480"   # --size of the default camera
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser(
         "simulate", help="render a rolling-shutter video of a calibration target, with ground truth",
@@ -25,7 +28,7 @@ def add_parser(sub) -> None:
     p.add_argument("--line-delay", type=seconds_in(-0.01, 0.01), default=30e-6, metavar="D",
                    help="line delay d per row, seconds or with a unit (30us)")
     p.add_argument("--fps", type=number(1.0, 1000.0, " fps"), default=30.0, help="frame rate (30); frame i is stamped i/fps")
-    p.add_argument("--size", type=image_size, default="640x480", metavar="WxH",
+    p.add_argument("--size", type=image_size, default=None, metavar="WxH",
                    help="image size WIDTHxHEIGHT of the default camera; f = 500 px * width/640 (640x480)")
     p.add_argument("--camera", default=None, metavar="FILE",
                    help="camera file (OpenCV YAML or Kalibr camchain) instead of the default camera; sets the size")
@@ -170,7 +173,11 @@ def run(args: argparse.Namespace) -> int:
     if args.scene and args.led:
         raise InputError("give --scene or --led, not both")
     if args.scene:
+        if args.size is not None or args.camera:   # the room walk's camera is fixed: say so, not ignore them
+            raise InputError("--scene renders the self-calibration paper's 320x240 camera; --size and --camera "
+                             "are for target videos and LED footage")
         return run_scene(args)
+    args.size = args.size or DEFAULT_SIZE
     if args.led:
         return run_led(args)
     if args.no_video and not args.frames_dir:

@@ -250,6 +250,8 @@ CASES = [
     ("simulate-fps-nan", lambda w: w.simulate("--fps", "nan"), ["--fps"]),
     ("simulate-fps-zero", lambda w: w.simulate("--fps", "0"), ["--fps"]),
     ("simulate-fps-huge", lambda w: w.simulate("--fps", "1e300"), ["--fps"]),
+    # --size was silently ignored by --scene (the room walk's camera is 320x240): a user's 640x480 "truth" was wrong
+    ("simulate-scene-with-size", lambda w: w.simulate("--scene"), ["--size"]),
     ("simulate-line-delay-nan", lambda w: w.simulate("--line-delay", "nan"), ["--line-delay"]),
     ("simulate-line-delay-huge", lambda w: w.simulate("--line-delay", "1e300"), ["--line-delay"]),
     ("simulate-exposure-inf", lambda w: w.simulate("--exposure", "inf"), ["--exposure"]),
