@@ -173,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
     if args.scene and args.led:
         raise InputError("give --scene or --led, not both")
     if args.scene:
-        if args.size is not None or args.camera:   # the room walk's camera is fixed: say so, not ignore them
+        if args.size not in (None, "320x240") or args.camera:   # the room walk's camera is fixed: say so
             raise InputError("--scene renders the self-calibration paper's 320x240 camera; --size and --camera "
                              "are for target videos and LED footage")
         return run_scene(args)

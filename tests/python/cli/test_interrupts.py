@@ -16,10 +16,13 @@ from pathlib import Path
 
 import pytest
 
+import rscalib
 import rscalib.cli.flicker
 from rscalib.cli import main
 
-PYTHON_DIR = Path(__file__).resolve().parents[3] / "python"
+# the folder holding the rscalib this test imported (the installed package in CI, python/ when developing):
+# a child process must run the same code, and the source tree has no built _core
+PYTHON_DIR = Path(rscalib.__file__).resolve().parents[1]
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 
 

@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
+import rscalib
 from rscalib.detection.cache import arrays_checksum, load_cache, save_cache
 from rscalib.detection.pipeline import detect_video
 from rscalib.detection.result import DetectionResult
@@ -19,7 +20,9 @@ from rscalib.observations import Observations
 
 CHECKERBOARD = target_from_dict({"target_type": "checkerboard", "targetCols": 9, "targetRows": 6,
                                  "rowSpacingMeters": 0.03, "colSpacingMeters": 0.03})
-PYTHON_DIR = Path(__file__).resolve().parents[3] / "python"
+# the folder holding the rscalib this test imported (the installed package in CI, python/ when developing):
+# a child process must run the same code, and the source tree has no built _core
+PYTHON_DIR = Path(rscalib.__file__).resolve().parents[1]
 
 
 def synthetic_result(frames=5, seed=0) -> DetectionResult:
