@@ -15,6 +15,7 @@ error bar is then left as it is and the verdict says so.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 import numpy as np
@@ -25,23 +26,35 @@ from ..observations import Observations
 AGREE_Z = 3.0
 
 
-def halves(observations: Observations, solve: Callable[[Observations], object]) -> dict:
+def halves(observations: Observations, solve: Callable[[Observations], object], parallel: bool = True) -> dict:
     """Solve the first and second half (by time) of `observations` with `solve` (a function of
     Observations returning a result with line_delay_s, line_delay_std_s, determined) and compare.
-    Returns the JSON-ready check: halves [{t_begin_s, t_end_s, line_delay_s, line_delay_std_s,
-    determined}], z, agree (True / False / None), widen (the factor for the whole video's sigma)."""
+    parallel: solve the two halves in two threads at once (the solver releases the GIL; the
+    results are the same either way). Returns the JSON-ready check: halves [{t_begin_s, t_end_s,
+    line_delay_s, line_delay_std_s, determined}], z, agree (True / False / None), widen (the factor
+    for the whole video's sigma)."""
     times = observations.frame_times_s
     t_mid = 0.5 * (times[0] + times[-1])
     out: dict = {"rule": f"agree when z = |d1 - d2| / sqrt(s1^2 + s2^2) <= {AGREE_Z:g}; sigma_d widened by "
                          "max(1, z) (Birge ratio)", "halves": [], "z": None, "agree": None, "widen": 1.0}
+    keeps = [times < t_mid, times >= t_mid]
+
+    def attempt(keep: np.ndarray):
+        try:
+            return solve(observations.subset_frames(keep)), None
+        except InputError as error:
+            return None, error
+
+    if parallel:
+        with ThreadPoolExecutor(max_workers=2, thread_name_prefix="rscalib-half") as pool:
+            attempts = list(pool.map(attempt, keeps))
+    else:
+        attempts = [attempt(keep) for keep in keeps]
     estimates = []
-    for first in (True, False):
-        keep = times < t_mid if first else times >= t_mid
+    for keep, (result, error) in zip(keeps, attempts):
         part = {"t_begin_s": float(times[keep][0]) if keep.any() else None,
                 "t_end_s": float(times[keep][-1]) if keep.any() else None}
-        try:
-            result = solve(observations.subset_frames(keep))
-        except InputError as error:
+        if error is not None:
             part["error"] = str(error)
             out["halves"].append(part)
             continue

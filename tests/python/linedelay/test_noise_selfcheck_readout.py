@@ -68,22 +68,24 @@ class _R:
         self.line_delay_s, self.line_delay_std_s, self.determined, self.normalised_cost = d, s, determined, 1.0
 
 
+def _by_half(obs, first, second):
+    """A fake solve answering by which half it was given (the halves run in two threads)."""
+    return lambda half: first if half.frame_times_s[0] == obs.frame_times_s[0] else second
+
+
 def test_halves_agree_and_widen_by_the_birge_ratio():
     obs, _ = _grid_observations()
-    answers = iter([_R(30e-6, 0.1e-6), _R(30.5e-6, 0.1e-6)])
-    check = selfcheck.halves(obs, lambda half: next(answers))
+    check = selfcheck.halves(obs, _by_half(obs, _R(30e-6, 0.1e-6), _R(30.5e-6, 0.1e-6)))
     z = 0.5 / math.hypot(0.1, 0.1)
     assert check["z"] == pytest.approx(z) and check["agree"] is False and check["widen"] == pytest.approx(z)
     assert selfcheck.widened_std(0.07e-6, check) == pytest.approx(0.07e-6 * z)
-    answers = iter([_R(30e-6, 0.1e-6), _R(30.1e-6, 0.1e-6)])
-    check = selfcheck.halves(obs, lambda half: next(answers))
+    check = selfcheck.halves(obs, _by_half(obs, _R(30e-6, 0.1e-6), _R(30.1e-6, 0.1e-6)))
     assert check["agree"] is True and check["widen"] == 1.0
 
 
 def test_halves_are_inconclusive_when_a_half_is_undetermined():
     obs, _ = _grid_observations()
-    answers = iter([_R(30e-6, 0.1e-6), _R(-3e-3, float("inf"), determined=False)])
-    check = selfcheck.halves(obs, lambda half: next(answers))
+    check = selfcheck.halves(obs, _by_half(obs, _R(30e-6, 0.1e-6), _R(-3e-3, float("inf"), determined=False)))
     assert check["agree"] is None and check["widen"] == 1.0 and "reason" in check
 
 
@@ -91,7 +93,29 @@ def test_halves_split_the_frames_in_time():
     obs, _ = _grid_observations(frames=40)
     seen = []
     selfcheck.halves(obs, lambda half: seen.append(half.frame_times_s.copy()) or _R(1e-5, 1e-7))
+    seen.sort(key=lambda t: t[0])
     assert seen[0][-1] < seen[1][0] and len(seen[0]) + len(seen[1]) == 40
+
+
+def test_halves_are_solved_at_once_with_the_same_answer():
+    """parallel=True runs both solves concurrently (each waits at a barrier the other must reach)
+    and reports exactly what the sequential check reports."""
+    import threading
+
+    obs, _ = _grid_observations(frames=40)
+    barrier = threading.Barrier(2, timeout=30)
+
+    def solve(half):
+        barrier.wait()
+        return _R(30e-6 + 1e-9 * len(half.frame_times_s), 0.1e-6)
+
+    parallel = selfcheck.halves(obs, solve, parallel=True)
+    barrier = threading.Barrier(2, timeout=0.5)
+    sequential = selfcheck.halves(obs, lambda half: _R(30e-6 + 1e-9 * len(half.frame_times_s), 0.1e-6),
+                                  parallel=False)
+    assert parallel == sequential and parallel["z"] is not None
+    with pytest.raises(threading.BrokenBarrierError):
+        selfcheck.halves(obs, solve, parallel=False)   # one solve alone never passes the barrier
 
 
 @pytest.mark.parametrize("readout", ["bottom-up", "left-right", "right-left"])
