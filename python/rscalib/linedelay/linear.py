@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .. import _core
 from .._core import CameraModel
@@ -82,6 +81,8 @@ class LinearInterpResult:
         """T_cw at times t: R (n, 3, 3), p (n, 3), x_c = R x_w + p. Interpolated between
         linked frames; up to max_frame_interval_s past a chain's end (before its start)
         extrapolated with its last (first) pair, as the solver does; NaN elsewhere."""
+        from scipy.spatial.transform import Rotation  # on use: the spline runs never import scipy.spatial
+
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).reshape(-1)
         times, poses, linked = self.frame_times_s, self.frame_poses, self.linked_to_next
         count = len(times)
@@ -114,6 +115,8 @@ class LinearInterpResult:
     def evaluate(self, t_s) -> np.ndarray:
         """(n, 6) states [p; phi] at times t (rotation vectors unwrapped over the finite rows,
         as the spline's state), NaN where pose_at is."""
+        from scipy.spatial.transform import Rotation
+
         rotations, translations = self.pose_at(t_s)
         out = np.full((len(translations), 6), np.nan)
         ok = np.isfinite(translations[:, 0])

@@ -135,14 +135,28 @@ def detrend_per_frame(observations: Observations, residual_px: np.ndarray, min_p
     min_points corners give NaN."""
     residual = np.asarray(residual_px, dtype=np.float64)
     out = np.full_like(residual, np.nan)
-    for rows in observations.frame_slices():
-        rows = rows[np.all(np.isfinite(residual[rows]), axis=1)]
-        if len(rows) < min_points:
-            continue
-        design = np.c_[np.ones(len(rows)), observations.uv[rows]]
-        design[:, 1:] -= design[:, 1:].mean(axis=0)
-        beta, *_ = np.linalg.lstsq(design, residual[rows], rcond=None)
-        out[rows] = (residual[rows] - design @ beta) * math.sqrt(len(rows) / (len(rows) - 3))
+    ok = np.all(np.isfinite(residual), axis=1)
+    frames = observations.frame_index[ok]
+    count = np.bincount(frames, minlength=observations.num_frames).astype(np.float64)
+    keep = count[frames] >= min_points
+    rows, frames = np.flatnonzero(ok)[keep], frames[keep]
+    if not len(rows):
+        return out
+    n = count[frames][:, None]
+
+    def frame_sum(values: np.ndarray) -> np.ndarray:  # (k, c) -> (frames, c)
+        return np.stack([np.bincount(frames, weights=column, minlength=observations.num_frames)
+                         for column in values.T], axis=1)
+
+    # All frames at once: the fitted intercept of an affine fit with centred (u, v) is the mean
+    # residual, and the slopes solve the 2 x 2 normal equations (pinv: min-norm, as lstsq).
+    uv = observations.uv[rows] - frame_sum(observations.uv[rows])[frames] / n
+    r = residual[rows] - frame_sum(residual[rows])[frames] / n
+    s = frame_sum(np.c_[uv[:, 0] * uv[:, 0], uv[:, 0] * uv[:, 1], uv[:, 1] * uv[:, 1]])
+    normal = np.stack([s[:, [0, 1]], s[:, [1, 2]]], axis=1)                                   # (F, 2, 2)
+    cross = frame_sum(np.c_[uv[:, [0]] * r, uv[:, [1]] * r]).reshape(-1, 2, r.shape[1])      # (F, 2, c)
+    slopes = np.linalg.pinv(normal) @ cross
+    out[rows] = (r - np.einsum("ki,kic->kc", uv, slopes[frames])) * np.sqrt(n / (n - 3))
     return out
 
 

@@ -14,6 +14,7 @@ before the solve; `on_round(RoundRecord)` after each knot-adaptation round of th
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional, Union
@@ -33,6 +34,7 @@ from . import selfcheck
 from .common import (
     UNDETERMINED_STD_FRACTION,
     IntrinsicsPrior,
+    check_solve_memory,
     frame_rate_hz,
     load_intrinsics_prior,
     require_frame_times,
@@ -194,10 +196,18 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
                        min_segment_s=min_segment_s, noise_model=noise_model, **knots)
         if refine_intrinsics:  # absent otherwise: the default path's calls are unchanged
             options |= {"refine_intrinsics": True, "intrinsics_prior": intrinsics_prior}
-        result = calibrate_line_delay(observations, solve_camera, rows, progress=on_round, **options)
+        # The halves do not need the whole video's answer: they are solved in other threads meanwhile
+        # (the solver releases the GIL), each half seeding its own poses; after it when the memory
+        # would not hold the three solves at once (together about two whole ones).
+        def solve_halves():
+            return selfcheck.halves(observations, lambda half: calibrate_line_delay(half, solve_camera, rows, **options))
+
+        alongside = self_check and _fits_in_memory(2 * observations.num_observations)
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="rscalib-selfcheck") as pool:
+            halves = pool.submit(solve_halves) if alongside else None
+            result = calibrate_line_delay(observations, solve_camera, rows, progress=on_round, **options)
+            check = halves.result() if alongside else solve_halves() if self_check else None
         if self_check:
-            check = selfcheck.halves(result.used_observations,
-                                     lambda half: calibrate_line_delay(half, solve_camera, result.rows, **options))
             result.self_check = check
             result.line_delay_std_s = selfcheck.widened_std(result.line_delay_std_s, check)
             if check.get("widen", 1.0) > 1.0:
@@ -222,6 +232,14 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
     except Exception as error:  # noqa: BLE001 - advice must never cost the result
         run.guidance = {"advice": [], "error": f"{type(error).__name__}: {error}"}
     return run
+
+
+def _fits_in_memory(num_observations: int) -> bool:
+    try:
+        check_solve_memory(num_observations)
+    except InputError:
+        return False
+    return True
 
 
 def localize_video(video: PathLike, target: PathLike, camera: PathLike, *, model: str = "rs-spline",

@@ -26,12 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Optional, Union
 
-import matplotlib
-
-matplotlib.use("Agg")  # files only; no display needed
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.patches import Ellipse  # noqa: E402
 
 from .. import _core  # noqa: E402
 from .._core import CameraModel  # noqa: E402
@@ -68,6 +63,17 @@ class Verdict:
     reasons: list[str]     # why not (or caveats)
     headline: str
     status: str = TRUSTED  # TRUSTED | NOT_TRUSTED | UNDETERMINED
+
+
+def _pyplot():
+    """pyplot on the Agg backend (files only, no display), imported on first use: `--no-report`
+    runs never pay its ~0.6 s import."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def _us(x: float) -> str:
@@ -183,6 +189,7 @@ def write_detections_vnl(detections: DetectionResult, path: Path) -> Optional[st
 # ------------------------------------------------------------------------------------- plots
 
 def _save(fig, path: Path) -> Path:
+    plt = _pyplot()
     fig.tight_layout()
     fig.savefig(path, dpi=110, bbox_inches="tight")   # nothing cut off (titles, side panels)
     plt.close(fig)
@@ -190,6 +197,7 @@ def _save(fig, path: Path) -> Path:
 
 
 def plot_residuals_time(result: Estimate, path: Path) -> Path:
+    plt = _pyplot()
     fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
     t = result.observation_time_s - _time_origin(result)
     for ax, k, name in ((axes[0], 0, "u"), (axes[1], 1, "v")):
@@ -204,6 +212,7 @@ def plot_residuals_time(result: Estimate, path: Path) -> Path:
 
 
 def plot_residuals_image(result: Estimate, path: Path) -> Path:
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 5.5))
     uv = result.used_observations.uv
     mag = np.linalg.norm(result.residual_px, axis=1)
@@ -224,6 +233,8 @@ def plot_covariance_ellipses(result: LineDelayResult, path: Path, count: int = 6
     line delay's image-motion term A, A R A^T) against R alone (grey), at a few observations with fast
     image motion (the solver's image velocities), drawn at their image position and magnified. Each
     ellipse is numbered; its speed and det A are listed beside the image, so labels never overlap."""
+    plt = _pyplot()
+    from matplotlib import patches
     obs = result.used_observations
     velocity = result.image_velocity_px_s
     speed = np.linalg.norm(velocity, axis=1)
@@ -244,7 +255,7 @@ def plot_covariance_ellipses(result: LineDelayResult, path: Path, count: int = 6
         for cov, color, width in ((r, "0.7", 4.0), (a @ r @ a.T, "r", 1.3)):   # grey wide: visible under red
             values, vectors = np.linalg.eigh(cov)
             angle = np.degrees(np.arctan2(vectors[1, 1], vectors[0, 1]))
-            ax.add_patch(Ellipse(obs.uv[i], 2 * scale * np.sqrt(values[1]), 2 * scale * np.sqrt(values[0]),
+            ax.add_patch(patches.Ellipse(obs.uv[i], 2 * scale * np.sqrt(values[1]), 2 * scale * np.sqrt(values[0]),
                                  angle=angle, fill=False, color=color, lw=width))
         ax.annotate(str(number), obs.uv[i], fontsize=9, fontweight="bold", ha="center", va="center")
         lines.append(f"{number}: {speed[i]:.0f} px/s\n    det A = {np.linalg.det(a):.3f}")
@@ -264,6 +275,7 @@ def plot_covariance_ellipses(result: LineDelayResult, path: Path, count: int = 6
 
 def plot_knots_and_speed(result: LineDelayResult, path: Path) -> Path:
     """Knot density against the image speed of the observations (the solver's image velocities)."""
+    plt = _pyplot()
     obs = result.used_observations
     speed = np.linalg.norm(result.image_velocity_px_s, axis=1)
     t0 = result.trajectory.t_begin
@@ -284,6 +296,7 @@ def plot_knots_and_speed(result: LineDelayResult, path: Path) -> Path:
 
 
 def plot_rounds(result: LineDelayResult, path: Path) -> Path:
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 3.6))
     rounds = [h.round for h in result.history]
     d = [h.line_delay_s * 1e6 for h in result.history]
@@ -304,6 +317,7 @@ def plot_rounds(result: LineDelayResult, path: Path) -> Path:
 
 def plot_trajectory(result: Estimate, path: Path) -> Path:
     """The estimated T_cw(t) (lines) against the per-frame GS PnP poses it started from (dots)."""
+    plt = _pyplot()
     t0 = _time_origin(result)
     if isinstance(result, LinearInterpResult):
         t = np.linspace(result.frame_times_s[0], result.frame_times_s[-1], 2000)
@@ -348,6 +362,7 @@ def _plot_jobs(result: Estimate) -> list:
 def _plots(result: Estimate, out: Path, failed: list) -> dict:
     """The plots of _plot_jobs drawn into out, {caption: path}; the ones that fail are left out
     and said in `failed`."""
+    plt = _pyplot()
     jobs = _plot_jobs(result)
     plots = {}
     for caption, plot, name in jobs:

@@ -63,6 +63,31 @@ def test_a_pose_error_per_frame_is_not_a_fixed_pattern():
     assert s.fixed_pattern_px < 0.03 and s.inflation < 1.2
 
 
+def test_detrend_per_frame_matches_a_least_squares_fit_per_frame():
+    """The vectorised detrend against numpy's lstsq of [1, u - mean u, v - mean v] frame by frame, with an
+    empty frame, a 5-point frame (too few: NaN), collinear points, one repeated point and NaN residuals."""
+    rng = np.random.default_rng(3)
+    frames, points = 40, 54
+    fi, pid = np.repeat(np.arange(frames), points), np.tile(np.arange(points), frames)
+    keep = (rng.uniform(size=len(fi)) > 0.2) & (fi != 5) & ~((fi == 6) & (pid >= 5))
+    uv = rng.uniform(0, 640, (len(fi), 2))
+    uv[fi == 7, 1] = 100.0
+    uv[fi == 8] = uv[fi == 8][0]
+    res = rng.normal(size=(len(fi), 2))
+    res[rng.uniform(size=len(fi)) < 0.02] = np.nan
+    obs = Observations(np.arange(frames) / 30.0, fi[keep], pid[keep], uv[keep], np.zeros((points, 3)), (640, 480))
+    got = noise.detrend_per_frame(obs, res[keep])
+    expected = np.full_like(got, np.nan)
+    for rows in obs.frame_slices():
+        rows = rows[np.all(np.isfinite(res[keep][rows]), axis=1)]
+        if len(rows) >= 8:
+            design = np.c_[np.ones(len(rows)), obs.uv[rows] - obs.uv[rows].mean(axis=0)]
+            beta = np.linalg.lstsq(design, res[keep][rows], rcond=None)[0]
+            expected[rows] = (res[keep][rows] - design @ beta) * math.sqrt(len(rows) / (len(rows) - 3))
+    assert np.array_equal(np.isnan(got), np.isnan(expected)) and np.isnan(got[obs.frame_index == 6]).all()
+    np.testing.assert_allclose(got[~np.isnan(got)], expected[~np.isnan(expected)], atol=1e-12)
+
+
 class _R:
     def __init__(self, d, s, determined=True):
         self.line_delay_s, self.line_delay_std_s, self.determined, self.normalised_cost = d, s, determined, 1.0

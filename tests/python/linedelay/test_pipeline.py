@@ -48,6 +48,22 @@ def test_calibrate_video_is_detect_then_the_engine(video, tmp_path):
                             "start_s": None, "end_s": None}
 
 
+def test_the_self_check_is_the_same_alongside_the_whole_solve_or_after_it(video, tmp_path, monkeypatch):
+    """The halves run beside the whole solve (issue 17) unless memory would not hold the three solves;
+    both ways give the check selfcheck.halves gives on the detected frames, and the same d."""
+    from rscalib.linedelay import selfcheck
+
+    alongside = pipeline.calibrate_video(*files(video), cache_dir=tmp_path / "cache")
+    monkeypatch.setattr(pipeline, "_fits_in_memory", lambda num_observations: False)
+    after = pipeline.calibrate_video(*files(video), cache_dir=tmp_path / "cache")
+    camera = load_camera(video / "camera.yaml").camera
+    observations = pipeline.detect(*files(video)[:2], camera, cache_dir=tmp_path / "cache").observations
+    direct = selfcheck.halves(observations, lambda half: calibrate_line_delay(half, camera), parallel=False)
+    assert alongside.result.self_check == after.result.self_check == direct
+    assert len(direct["halves"]) == 2 and direct["z"] is not None
+    assert alongside.result.line_delay_s == after.result.line_delay_s
+
+
 def test_linear_writes_a_report_through_the_same_writers(video, tmp_path):
     run = pipeline.calibrate_video(*files(video), model="linear", cache_dir=tmp_path / "cache")
     summary = write_video_outputs(run, tmp_path / "lin")

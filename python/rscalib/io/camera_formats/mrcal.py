@@ -137,9 +137,12 @@ def write_corners_vnl(path, frame_names: list, frame_index: np.ndarray, point_id
     rows = [f"## written by rscalib {__version__}: target grid {width} x {height}, pixels in OpenCV's convention",
             "# filename x y level"]
     frames = 0
+    frame_index = np.asarray(frame_index)
+    order = np.argsort(frame_index, kind="stable")  # one pass over the observations, not one per frame
+    bounds = np.searchsorted(frame_index[order], np.arange(len(frame_names) + 1))
     for f, name in enumerate(frame_names):
-        mine = frame_index == f
-        if not np.any(mine):
+        mine = order[bounds[f]:bounds[f + 1]]
+        if not len(mine):
             continue
         table = np.full((width * height, 2), np.nan)
         table[point_id[mine]] = uv[mine]
