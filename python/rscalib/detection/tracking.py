@@ -1,6 +1,8 @@
 """Checkerboard tracking between full detections: predict, refine, verify, else detect again.
 
-A video is cut into runs of `DetectOptions.full_detection_every` consecutive frames (run_length).
+A video is cut into runs of `DetectOptions.full_detection_every` consecutive frame indices
+(run_length; run k holds frames k*N .. k*N + N - 1, so a worker that decodes its own segment
+of the video starts a run where one sequential pass would).
 The first frame of a run is detected from scratch (Detector.detect). Each later frame is
 predicted from the two accepted frames before it: the image-to-image homography of the last
 step applied once more (constant velocity), or the last corners if only one frame is known.
@@ -47,27 +49,30 @@ def run_length(target: Target, options: DetectOptions) -> int:
 def detect_run(detector: Detector, images: Sequence[np.ndarray], indices: Sequence[int]) -> list[FrameDetection]:
     """Detections in one run of frames (grey images and their indices in the source, in order):
     full detection on the first, tracking on the rest where the target allows it."""
-    runs = RunDetector(detector, len(images))
-    return [runs.detect(image, index) for image, index in zip(images, indices)]
+    if detector.target.target_type not in TRACKED_TARGETS:
+        return [detector.detect(image) for image in images]
+    tracker = CheckerboardTracker(detector)
+    return [tracker.detect(image, index) for image, index in zip(images, indices)]
 
 
 class RunDetector:
-    """Frames one at a time, in order, cut into runs of run_frames: a fresh tracker for each run
-    (the same detections as detect_run on each run), full detection for untracked targets."""
+    """Frames one at a time, in order, cut into runs by index (index // run_frames): a fresh
+    tracker for each run (the same detections as detect_run on each run), full detection for
+    untracked targets."""
 
     def __init__(self, detector: Detector, run_frames: int):
         self.detector = detector
         self.run_frames = max(1, int(run_frames))
         self.tracked = detector.target.target_type in TRACKED_TARGETS
-        self._seen = 0
+        self._run: Optional[int] = None
         self._tracker: Optional[CheckerboardTracker] = None
 
     def detect(self, image: np.ndarray, index: int) -> FrameDetection:
         if not self.tracked:
             return self.detector.detect(image)
-        if self._seen % self.run_frames == 0:
+        if index // self.run_frames != self._run:  # runs by frame index: any worker can start one
+            self._run = index // self.run_frames
             self._tracker = CheckerboardTracker(self.detector)
-        self._seen += 1
         return self._tracker.detect(image, index)
 
 
