@@ -1,5 +1,6 @@
-"""Detection over a whole video or image sequence: decoding here, detection in a pool of
-worker processes, accepted detections as Observations, drops counted by reason, a cache."""
+"""Detection over a whole video or image sequence: worker processes that decode their own
+segments of a video (or frames decoded here and shipped to them), accepted detections as
+Observations, drops counted by reason, a cache."""
 from __future__ import annotations
 
 import contextlib
@@ -36,11 +37,15 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
     """Detect `target` in every frame of a video, an image folder (file-name order, optional
     timestamps.txt) or a list of image files.
 
-    workers: processes (default: the usable cores; in this process for under 64 frames). The
-    video is decoded here, in a thread, and streamed to the workers in runs of consecutive
-    frames (checkerboards are tracked within a run: tracking.py) with a bounded queue, so memory
-    does not grow with its length; the result does not depend on the number of workers. Workers are spawned (not forked), so a calling script needs the usual
-    `if __name__ == "__main__":` guard.
+    workers: processes (default: the usable cores; in this process for under 64 frames). A video
+    of at least 4 runs per worker is cut into segments of whole runs (checkerboards are tracked
+    within a run: tracking.py) that the workers decode themselves (segment_plan); each segment's
+    seek is verified against the frame the segment before it decoded next, and if one is not,
+    the video is decoded here instead. Otherwise (image sequences, short videos) frames are
+    decoded here, in a thread, and streamed to the workers in runs with a bounded queue. Either
+    way memory does not grow with the length, and the result is that of one sequential pass,
+    whatever the number of workers. Workers are spawned (not forked), so a calling script needs
+    the usual `if __name__ == "__main__":` guard.
     cache: reuse / store the result under cache_dir (default_cache_dir()), keyed by the hash of
     the source's bytes, the target definition, the options and DETECTOR_VERSION."""
     if not isinstance(target, Target):
@@ -220,21 +225,11 @@ def _detect_segments(frames: FrameSource, plan: list, pool, run_frames: int, wor
         if not pending:
             break
         segment = pending.popleft().result()
-        if segment["no_container_times"]:
+        if not _continues(previous, segment, last_time_s, collected.size):
+            for future in pending:
+                future.cancel()  # those not started yet
             return None
-        if previous is not None:
-            if previous["after"] is None:
-                if segment["frames"]:
-                    return None  # the previous segment met the end of the file, this one has frames
-            elif segment["first"] != previous["after"]:
-                return None      # the seek landed elsewhere (or on an unusable frame)
-            elif last_time_s is not None and not segment["first"][0] > last_time_s:
-                return None      # one pass would have skipped this frame's time
-        if segment["size"] is not None:
-            if collected.size is None:
-                collected.size = segment["size"]
-            elif segment["size"] != collected.size:
-                return None
+        collected.size = collected.size or segment["size"]
         for info, detection in segment["frames"]:
             collected.record(info, detection)
         collected.total += len(segment["frames"])
@@ -246,6 +241,24 @@ def _detect_segments(frames: FrameSource, plan: list, pool, run_frames: int, wor
         return None  # e.g. nothing decodable: the sequential pass reports it
     frames.note_non_increasing(non_increasing)
     return collected
+
+
+def _continues(previous: Optional[dict], segment: dict, last_time_s: Optional[float], size: Optional[tuple]) -> bool:
+    """Whether a segment's frames are those one sequential pass would give after the segments
+    before it (previous: the last of them; last_time_s: their last accepted time; size: their
+    frame size)."""
+    if segment["no_container_times"]:
+        return False  # times come from index / fps: the sequential pass decides that
+    if segment["size"] is not None and size is not None and segment["size"] != size:
+        return False
+    if previous is None:
+        return True
+    if previous["after"] is None:
+        return not segment["frames"]  # the previous segment met the end of the file
+    if segment["first"] != previous["after"]:
+        return False  # the seek landed elsewhere (or on an unusable frame)
+    # one pass would have skipped a frame whose time does not increase
+    return last_time_s is None or segment["first"][0] > last_time_s
 
 
 def _start_pool(workers: int, target: Target, options: DetectOptions):
