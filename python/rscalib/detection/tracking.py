@@ -4,8 +4,9 @@ A video is cut into runs of `DetectOptions.full_detection_every` consecutive fra
 (run_length; run k holds frames k*N .. k*N + N - 1, so a worker that decodes its own segment
 of the video starts a run where one sequential pass would).
 The first frame of a run is detected from scratch (Detector.detect). Each later frame is
-predicted from the two accepted frames before it: the image-to-image homography of the last
-step applied once more (constant velocity), or the last corners if only one frame is known.
+predicted from the board's place in the two frames before it: the image-to-image homography of
+the last step applied once more per frame (constant velocity; over up to MAX_GAP_FRAMES frames
+without a full board), or the last corners if only one frame is known.
 A wide cornerSubPix pass (half-window 0.4 grid steps) pulls the prediction onto the corners;
 the detector's own refinement and checks follow (Detector.refine_checkerboard: cornerSubPix
 with the full detection's window, ids, blur, local geometry, here with a stricter residual
@@ -16,7 +17,14 @@ bound). The track is then verified:
 - every corner is a saddle: its diagonal quadrants are bright, the others dark, or the reverse,
   alternating over the grid (a square's outer corner, an occluder or a lost grid fails).
 
-A frame failing any of these is detected from scratch. Runs are independent of each other, so
+A frame failing any of these is detected from scratch, with one exception that saves the
+costliest full detections (a failing one takes ~350 ms at 1080p): when the board is predicted
+partly outside the image and the corners predicted well inside are found there (the same
+shift and saddle checks), the homography of those corners places the rest; if a corner lies
+OUTSIDE_STEPS grid steps beyond the border, no full board is in the image and the frame is
+no_target without a full detection. That board (or one seen in part when a full detection
+fails) also continues the track, so the board is re-acquired by tracking when it comes back.
+Runs are independent of each other, so
 worker processes take whole runs and the result does not depend on the number of workers.
 Other target types are detected from scratch in every frame (docs/benchmarks.md, issue 17).
 """
