@@ -3,6 +3,7 @@ video in whole runs, a segment's seek is verified against the frame its predeces
 next, and the detections are exactly those of one sequential pass (also when a seek lands
 elsewhere: then the video is decoded in the main process)."""
 from concurrent.futures import Future
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -186,3 +187,31 @@ def test_a_board_leaving_the_image_costs_no_full_detection_and_loses_no_frame(mp
     # tracked corners: full detection's to within its noise (as in test_tracking.py)
     differences = np.concatenate(differences)
     assert np.median(differences) < 0.02 and differences.max() < 0.1
+
+
+DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data"
+PHONE_VIDEO = DATA / "real_selfcalib_s3phone" / "escritorio_traslacion.mp4"
+
+
+@pytest.mark.skipif(not PHONE_VIDEO.is_file(), reason="shared fixtures ../shared/data not present")
+def test_a_phone_video_is_decoded_in_verified_segments():
+    """A real phone video (H.264, variable frame timing): every segment's seek is verified and
+    the segments give the frames and times of one sequential pass."""
+    check_segments_against_one_pass(PHONE_VIDEO)
+
+
+def check_segments_against_one_pass(path):
+    source = open_source(path)
+    sequential = [(f.index, f.time_s, frame_digest(f.image)) for f in source.frames(gray=True)]
+    plan = segment_plan(source.frame_count_estimate, 2, 20)
+    assert plan is not None and len(plan) >= 4
+    previous, last_time_s, decoded = None, None, []
+    for start, stop in plan:
+        segment = VideoSegment(path, source.fps_nominal, start, stop)
+        frames = [(f.index, f.time_s, frame_digest(f.image)) for f in segment.frames()]
+        record = {"frames": frames, "first": segment.first, "after": segment.after, "size": None,
+                  "no_container_times": segment.no_container_times}
+        assert pipeline._continues(previous, record, last_time_s, None), start
+        decoded += frames
+        previous, last_time_s = record, segment.last_time_s
+    assert decoded == sequential
