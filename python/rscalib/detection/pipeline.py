@@ -1,5 +1,6 @@
-"""Detection over a whole video or image sequence: decoding here, detection in a pool of
-worker processes, accepted detections as Observations, drops counted by reason, a cache."""
+"""Detection over a whole video or image sequence: worker processes that decode their own
+segments of a video (or frames decoded here and shipped to them), accepted detections as
+Observations, drops counted by reason, a cache."""
 from __future__ import annotations
 
 import contextlib
@@ -22,7 +23,7 @@ import numpy as np
 from .._progress import Progress
 from ..io.limits import bounded_workers, usable_cores
 from ..io.targets import Target, load_target
-from ..io.video import FrameSource, open_source
+from ..io.video import FrameSource, VideoSegment, open_source
 from ..observations import Observations
 from .cache import default_cache_dir, load_cache, save_cache
 from .detectors import DETECTOR_VERSION, DROP_REASONS, DetectOptions, Detector, FrameDetection
@@ -36,11 +37,15 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
     """Detect `target` in every frame of a video, an image folder (file-name order, optional
     timestamps.txt) or a list of image files.
 
-    workers: processes (default: the usable cores; in this process for under 64 frames). The
-    video is decoded here, in a thread, and streamed to the workers in runs of consecutive
-    frames (checkerboards are tracked within a run: tracking.py) with a bounded queue, so memory
-    does not grow with its length; the result does not depend on the number of workers. Workers are spawned (not forked), so a calling script needs the usual
-    `if __name__ == "__main__":` guard.
+    workers: processes (default: the usable cores; in this process for under 64 frames). A video
+    of at least 4 runs per worker is cut into segments of whole runs (checkerboards are tracked
+    within a run: tracking.py) that the workers decode themselves (segment_plan); each segment's
+    seek is verified against the frame the segment before it decoded next, and if one is not,
+    the video is decoded here instead. Otherwise (image sequences, short videos) frames are
+    decoded here, in a thread, and streamed to the workers in runs with a bounded queue. Either
+    way memory does not grow with the length, and the result is that of one sequential pass,
+    whatever the number of workers. Workers are spawned (not forked), so a calling script needs
+    the usual `if __name__ == "__main__":` guard.
     cache: reuse / store the result under cache_dir (default_cache_dir()), keyed by the hash of
     the source's bytes, the target definition, the options and DETECTOR_VERSION."""
     if not isinstance(target, Target):
@@ -120,6 +125,150 @@ def _worker_detect_run(images: list, indices: list) -> list:
     return detect_run(_WORKER_DETECTOR, images, indices)
 
 
+# Workers decode their own segment of a video (no decoded frame is shipped) when it has at least
+# this many runs per worker; a segment is SEGMENT_RUNS_PER_TASK_MAX runs at most (progress, memory).
+SEGMENT_MIN_RUNS_PER_WORKER = 4
+SEGMENT_RUNS_PER_TASK_MAX = 15
+
+
+def segment_plan(frame_count: Optional[int], workers: int, run_frames: int) -> Optional[list]:
+    """(start, stop) frame ranges, each a whole number of runs, about 4 per worker; the last open
+    (stop None: to the end, the container's frame count may be off). None: too short to pay."""
+    if workers < 2 or frame_count is None or frame_count < SEGMENT_MIN_RUNS_PER_WORKER * workers * run_frames:
+        return None
+    runs_per_task = int(np.clip(round(frame_count / (SEGMENT_MIN_RUNS_PER_WORKER * workers * run_frames)),
+                                1, SEGMENT_RUNS_PER_TASK_MAX))
+    step = runs_per_task * run_frames
+    starts = list(range(0, frame_count, step))
+    return [(start, stop) for start, stop in zip(starts, starts[1:] + [None])]
+
+
+def _worker_detect_segment(path: str, fps: Optional[float], start: int, stop: Optional[int], run_frames: int) -> dict:
+    """Decode frames start .. stop - 1 here and detect them as one sequential pass would: runs of
+    run_frames frames by index, frames of another size than the segment's first dropped."""
+    segment = VideoSegment(path, fps, start, stop)
+    runs = RunDetector(_WORKER_DETECTOR, run_frames)
+    frames, size = [], None
+    for frame in segment.frames(gray=True):
+        info = (frame.index, frame.time_s, frame.label)
+        if frame.image is None:
+            frames.append((info, frame.problem or "unreadable"))
+            continue
+        shape = (frame.image.shape[1], frame.image.shape[0])
+        size = size or shape
+        frames.append((info, runs.detect(frame.image, frame.index) if shape == size else "image_size"))
+    return {"frames": frames, "size": size, "first": segment.first, "after": segment.after,
+            "last_time_s": segment.last_time_s, "non_increasing": segment.non_increasing,
+            "no_container_times": segment.no_container_times}
+
+
+class _Collected:
+    """Accepted detections and drop counts, in frame order, and the DetectionResult they make."""
+
+    def __init__(self):
+        self.dropped = {reason: 0 for reason in DROP_REASONS}
+        self.times, self.numbers, self.labels, self.blur, self.ids, self.uvs = [], [], [], [], [], []
+        self.total = 0
+        self.size = None
+
+    def record(self, info: tuple, detection: Union[FrameDetection, str]) -> None:
+        """A frame's detection, or the reason it was dropped before detection."""
+        if isinstance(detection, str):
+            self.dropped[detection] += 1
+            return
+        number, time_s, label = info
+        if detection.reason is not None:
+            self.dropped[detection.reason] += 1
+            return
+        self.times.append(time_s)
+        self.numbers.append(number)
+        self.labels.append(label)
+        self.blur.append(detection.blur_px)
+        self.ids.append(detection.point_id)
+        self.uvs.append(detection.uv)
+
+    def result(self, frames: FrameSource, target: Target) -> DetectionResult:
+        image_size = self.size or (0, 0)
+        counts = [len(i) for i in self.ids]
+        observations = Observations(
+            frame_times_s=np.asarray(self.times, dtype=np.float64),
+            frame_index=np.repeat(np.arange(len(self.ids)), counts),
+            point_id=np.concatenate(self.ids) if self.ids else np.zeros(0, np.int64),
+            uv=np.concatenate(self.uvs) if self.uvs else np.zeros((0, 2)),
+            target_points=target.points_m,
+            image_size=image_size,
+        )
+        return DetectionResult(observations, self.total, len(self.ids),
+                               {k: v for k, v in self.dropped.items() if v}, False, image_size,
+                               np.asarray(self.numbers, dtype=np.int64), self.labels,
+                               np.asarray(self.blur, dtype=np.float64), frames.timestamps_source, list(frames.warnings))
+
+
+def _detect_segments(frames: FrameSource, plan: list, pool, run_frames: int, workers: int,
+                     bar) -> Optional[_Collected]:
+    """Detection by workers that decode their own segments (plan). None when a segment cannot be
+    verified to start where it claims, or the container has no frame times (the caller then
+    decodes here): the result is then exactly that of one sequential pass."""
+    collected = _Collected()
+    pending: deque = deque()
+    tasks = iter(plan)
+    previous, last_time_s = None, None
+    non_increasing = 0
+    while True:
+        while len(pending) <= workers:
+            task = next(tasks, None)
+            if task is None:
+                break
+            with _sigint_blocked():
+                pending.append(pool.submit(_worker_detect_segment, str(frames.paths[0]), frames.fps_nominal,
+                                           task[0], task[1], run_frames))
+        if not pending:
+            break
+        segment = pending.popleft().result()
+        if not _continues(previous, segment, last_time_s, collected.size):
+            for future in pending:
+                future.cancel()  # those not started yet
+            return None
+        collected.size = collected.size or segment["size"]
+        for info, detection in segment["frames"]:
+            collected.record(info, detection)
+        collected.total += len(segment["frames"])
+        non_increasing += segment["non_increasing"]
+        last_time_s = segment["last_time_s"] if segment["last_time_s"] is not None else last_time_s
+        previous = segment
+        bar.update(collected.total)
+    if collected.total == 0:
+        return None  # e.g. nothing decodable: the sequential pass reports it
+    frames.note_non_increasing(non_increasing)
+    return collected
+
+
+def _continues(previous: Optional[dict], segment: dict, last_time_s: Optional[float], size: Optional[tuple]) -> bool:
+    """Whether a segment's frames are those one sequential pass would give after the segments
+    before it (previous: the last of them; last_time_s: their last accepted time; size: their
+    frame size)."""
+    if segment["no_container_times"]:
+        return False  # times come from index / fps: the sequential pass decides that
+    if segment["size"] is not None and size is not None and segment["size"] != size:
+        return False
+    if previous is None:
+        return True
+    if previous["after"] is None:
+        return not segment["frames"]  # the previous segment met the end of the file
+    if segment["first"] != previous["after"]:
+        return False  # the seek landed elsewhere (or on an unusable frame)
+    # one pass would have skipped a frame whose time does not increase
+    return last_time_s is None or segment["first"][0] > last_time_s
+
+
+def _start_pool(workers: int, target: Target, options: DetectOptions):
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    # spawn: forking a process that already runs OpenCV's thread pool is not safe
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_worker_init, initargs=(target, options, os.getpid()))
+
+
 def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, workers: Optional[int],
                    progress: bool) -> DetectionResult:
     estimate = frames.frame_count_estimate
@@ -130,35 +279,33 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
     main_file = getattr(sys.modules.get("__main__"), "__file__", None)
     if main_file and not os.path.exists(main_file):
         workers = 1  # a script read from stdin: spawned workers could not re-import it
-    dropped = {reason: 0 for reason in DROP_REASONS}
-    times, numbers, labels, blur, ids, uvs = [], [], [], [], [], []
-    state = {"total": 0, "size": None}
-
-    def record(info: tuple, detection: FrameDetection) -> None:
-        number, time_s, label = info
-        if detection.reason is not None:
-            dropped[detection.reason] += 1
-            return
-        times.append(time_s)
-        numbers.append(number)
-        labels.append(label)
-        blur.append(detection.blur_px)
-        ids.append(detection.point_id)
-        uvs.append(detection.uv)
-
-    pool = None
-    detector = None
-    if workers > 1:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-        # spawn: forking a process that already runs OpenCV's thread pool is not safe
-        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_worker_init, initargs=(target, options, os.getpid()))
-    # runs of consecutive frames, each tracked within itself (tracking.py): a worker takes whole
-    # runs; in this process they stream through a RunDetector (the same detections)
+    # runs of consecutive frames by index (run = index // run_frames), each tracked within itself
+    # (tracking.py): a worker takes whole runs; in this process they stream through a RunDetector
     run_frames = run_length(target, options)
-    if pool is None:
-        detector = RunDetector(Detector(target, options), run_frames)
+    pool = _start_pool(workers, target, options) if workers > 1 else None
+    detector = RunDetector(Detector(target, options), run_frames) if pool is None else None
+    plan = segment_plan(estimate, workers, run_frames) if frames.kind == "video" else None
+    try:
+        with Progress(progress, estimate, f"detecting {target.target_type}") as bar:
+            collected = _detect_segments(frames, plan, pool, run_frames, workers, bar) if plan else None
+            if collected is None:
+                collected = _decode_here(frames, pool, detector, run_frames, workers, bar)
+    except BaseException:
+        if pool is not None:  # interrupted (Ctrl-C, SIGTERM) or failed: stop the workers now, not after their frames
+            stop_workers(pool)
+            pool = None
+        raise
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+    return collected.result(frames, target)
+
+
+def _decode_here(frames: FrameSource, pool, detector: Optional[RunDetector], run_frames: int, workers: int,
+                 bar) -> _Collected:
+    """Decoding in this process (in a thread when there are workers), frames streamed to the
+    workers in runs through a bounded queue."""
+    collected = _Collected()
     pending: deque = deque()
     run: list = []
     max_pending = 2 * workers if run_frames == 1 else workers + 1  # runs in flight: bounded memory
@@ -172,60 +319,38 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
     def record_run(item) -> None:
         infos, future = item
         for info, detection in zip(infos, future.result()):
-            record(info, detection)
+            collected.record(info, detection)
 
-    try:
-        with Progress(progress, estimate, f"detecting {target.target_type}") as bar:
-            decoded = frames.frames(gray=True)
-            if pool is not None:  # decode while the workers detect; in-process, one frame at a time
-                decoded = _decoded_ahead(decoded, run_frames)
-            for frame in decoded:
-                state["total"] += 1
-                if frame.image is None:
-                    dropped[frame.problem or "unreadable"] += 1
-                    continue
-                size = (frame.image.shape[1], frame.image.shape[0])
-                if state["size"] is None:
-                    state["size"] = size
-                elif size != state["size"]:
-                    dropped["image_size"] += 1
-                    continue
-                info = (frame.index, frame.time_s, frame.label)
-                if pool is None:
-                    record(info, detector.detect(frame.image, frame.index))
-                else:
-                    run.append((info, frame.image))
-                    if len(run) == run_frames:
-                        submit_run()
-                    while len(pending) > max_pending:
-                        record_run(pending.popleft())
-                bar.update(state["total"] - len(run) - run_frames * len(pending))
-            if run:
+    decoded = frames.frames(gray=True)
+    if pool is not None:  # decode while the workers detect; in-process, one frame at a time
+        decoded = _decoded_ahead(decoded, run_frames)
+    for frame in decoded:
+        collected.total += 1
+        if frame.image is None:
+            collected.record(None, frame.problem or "unreadable")
+            continue
+        size = (frame.image.shape[1], frame.image.shape[0])
+        if collected.size is None:
+            collected.size = size
+        elif size != collected.size:
+            collected.record(None, "image_size")
+            continue
+        info = (frame.index, frame.time_s, frame.label)
+        if pool is None:
+            collected.record(info, detector.detect(frame.image, frame.index))
+        else:
+            if run and run[-1][0][0] // run_frames != frame.index // run_frames:
                 submit_run()
-            while pending:
+            run.append((info, frame.image))
+            while len(pending) > max_pending:
                 record_run(pending.popleft())
-            bar.update(state["total"])
-    except BaseException:
-        if pool is not None:  # interrupted (Ctrl-C, SIGTERM) or failed: stop the workers now, not after their frames
-            stop_workers(pool)
-            pool = None
-        raise
-    finally:
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
-    image_size = state["size"] or (0, 0)
-    counts = [len(i) for i in ids]
-    observations = Observations(
-        frame_times_s=np.asarray(times, dtype=np.float64),
-        frame_index=np.repeat(np.arange(len(ids)), counts),
-        point_id=np.concatenate(ids) if ids else np.zeros(0, np.int64),
-        uv=np.concatenate(uvs) if uvs else np.zeros((0, 2)),
-        target_points=target.points_m,
-        image_size=image_size,
-    )
-    return DetectionResult(observations, state["total"], len(ids), {k: v for k, v in dropped.items() if v},
-                           False, image_size, np.asarray(numbers, dtype=np.int64), labels,
-                           np.asarray(blur, dtype=np.float64), frames.timestamps_source, list(frames.warnings))
+        bar.update(collected.total - len(run) - run_frames * len(pending))
+    if run:
+        submit_run()
+    while pending:
+        record_run(pending.popleft())
+    bar.update(collected.total)
+    return collected
 
 
 def stop_workers(pool, timeout_s: float = 2.0) -> None:

@@ -1,9 +1,12 @@
 """Checkerboard tracking between full detections: predict, refine, verify, else detect again.
 
-A video is cut into runs of `DetectOptions.full_detection_every` consecutive frames (run_length).
+A video is cut into runs of `DetectOptions.full_detection_every` consecutive frame indices
+(run_length; run k holds frames k*N .. k*N + N - 1, so a worker that decodes its own segment
+of the video starts a run where one sequential pass would).
 The first frame of a run is detected from scratch (Detector.detect). Each later frame is
-predicted from the two accepted frames before it: the image-to-image homography of the last
-step applied once more (constant velocity), or the last corners if only one frame is known.
+predicted from the board's place in the two frames before it: the image-to-image homography of
+the last step applied once more per frame (constant velocity; over up to MAX_GAP_FRAMES frames
+without a full board), or the last corners if only one frame is known.
 A wide cornerSubPix pass (half-window 0.4 grid steps) pulls the prediction onto the corners;
 the detector's own refinement and checks follow (Detector.refine_checkerboard: cornerSubPix
 with the full detection's window, ids, blur, local geometry, here with a stricter residual
@@ -14,7 +17,14 @@ bound). The track is then verified:
 - every corner is a saddle: its diagonal quadrants are bright, the others dark, or the reverse,
   alternating over the grid (a square's outer corner, an occluder or a lost grid fails).
 
-A frame failing any of these is detected from scratch. Runs are independent of each other, so
+A frame failing any of these is detected from scratch, with one exception that saves the
+costliest full detections (a failing one takes ~350 ms at 1080p): when the board is predicted
+partly outside the image and the corners predicted well inside are found there (the same
+shift and saddle checks), the homography of those corners places the rest; if a corner lies
+OUTSIDE_STEPS grid steps beyond the border, no full board is in the image and the frame is
+no_target without a full detection. That board (or one seen in part when a full detection
+fails) also continues the track, so the board is re-acquired by tracking when it comes back.
+Runs are independent of each other, so
 worker processes take whole runs and the result does not depend on the number of workers.
 Other target types are detected from scratch in every frame (docs/benchmarks.md, issue 17).
 """
@@ -35,6 +45,9 @@ MIN_CONTRAST = 20.0     # grey levels between the bright and the dark quadrants 
 MIN_SADDLE_GAP = 0.25   # darker bright quadrant minus brighter dark quadrant, in units of that contrast
 MAX_TRACK_RESIDUAL = 0.1  # local-homography residual of a tracked corner, grid steps (good ones: < 0.02)
 WIDE_WINDOW_STEPS = 0.4   # first sub-pixel pass from the prediction: half-window in grid steps
+OUTSIDE_STEPS = 0.1       # a corner this far (grid steps) beyond the border by the homography of the seen ones is
+                          # not in the image (lens distortion moves it far less over the one step it extrapolates)
+MAX_GAP_FRAMES = 3        # frames a track is extrapolated over (frames with no full board, e.g. it left the image)
 
 
 def run_length(target: Target, options: DetectOptions) -> int:
@@ -47,27 +60,30 @@ def run_length(target: Target, options: DetectOptions) -> int:
 def detect_run(detector: Detector, images: Sequence[np.ndarray], indices: Sequence[int]) -> list[FrameDetection]:
     """Detections in one run of frames (grey images and their indices in the source, in order):
     full detection on the first, tracking on the rest where the target allows it."""
-    runs = RunDetector(detector, len(images))
-    return [runs.detect(image, index) for image, index in zip(images, indices)]
+    if detector.target.target_type not in TRACKED_TARGETS:
+        return [detector.detect(image) for image in images]
+    tracker = CheckerboardTracker(detector)
+    return [tracker.detect(image, index) for image, index in zip(images, indices)]
 
 
 class RunDetector:
-    """Frames one at a time, in order, cut into runs of run_frames: a fresh tracker for each run
-    (the same detections as detect_run on each run), full detection for untracked targets."""
+    """Frames one at a time, in order, cut into runs by index (index // run_frames): a fresh
+    tracker for each run (the same detections as detect_run on each run), full detection for
+    untracked targets."""
 
     def __init__(self, detector: Detector, run_frames: int):
         self.detector = detector
         self.run_frames = max(1, int(run_frames))
         self.tracked = detector.target.target_type in TRACKED_TARGETS
-        self._seen = 0
+        self._run: Optional[int] = None
         self._tracker: Optional[CheckerboardTracker] = None
 
     def detect(self, image: np.ndarray, index: int) -> FrameDetection:
         if not self.tracked:
             return self.detector.detect(image)
-        if self._seen % self.run_frames == 0:
+        if index // self.run_frames != self._run:  # runs by frame index: any worker can start one
+            self._run = index // self.run_frames
             self._tracker = CheckerboardTracker(self.detector)
-        self._seen += 1
         return self._tracker.detect(image, index)
 
 
@@ -86,52 +102,96 @@ class CheckerboardTracker:
                                                           check_outer_ring=False))
         self.grid_shape = detector.target.grid_shape
         self._reindexings = grid_reindexings(self.grid_shape)
-        self._history: list[tuple[int, np.ndarray]] = []  # (index, uv) of the last accepted frames
-        self.counts = {"full": 0, "tracked": 0, "track_rejected": 0}
+        self._history: list[tuple[int, np.ndarray]] = []  # (index, uv) of the last frames with a known board
+        self.counts = {"full": 0, "tracked": 0, "track_rejected": 0, "left_image": 0}
 
     def detect(self, gray: np.ndarray, index: int) -> FrameDetection:
-        predicted = self.predict(index, gray.shape)
-        if predicted is not None:
+        predicted = self.extrapolate(index)
+        if predicted is not None and self._inside(predicted, gray.shape):
             # a wide first pass pulls the prediction (a few px off) onto the corners; the
             # detector's own refinement then runs exactly as after a full detection
-            half_window = int(np.clip(round(WIDE_WINDOW_STEPS * _min_step(predicted.reshape(*self.grid_shape, 2))), 2, 60))
-            criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.05)
-            coarse = cv2.cornerSubPix(gray, predicted.astype(np.float32).reshape(-1, 1, 2), (half_window, half_window),
-                                      (-1, -1), criteria).reshape(-1, 2).astype(np.float64)
+            coarse = _wide_subpix(gray, predicted, self.grid_shape)
             found = self._refiner.refine_checkerboard(gray, coarse)
             if found.accepted and self._verified(gray, predicted, found.uv):
                 self.counts["tracked"] += 1
-                self._remember(index, found)
+                self._remember(index, found.uv)
                 return found
             self.counts["track_rejected"] += 1
+        board = None
+        if predicted is not None and not self._inside(predicted, gray.shape):
+            board = self._partial_board(gray, predicted)
+            if board is not None and _beyond_border(board, gray.shape).max() >= OUTSIDE_STEPS * _min_step(
+                    board.reshape(*self.grid_shape, 2)):
+                self.counts["left_image"] += 1
+                self._remember(index, board)
+                return FrameDetection(np.zeros(0, np.int64), np.zeros((0, 2)), float("nan"), "no_target")
         self.counts["full"] += 1
         found = self.detector.detect(gray)
-        self._remember(index, found)
+        if found.accepted:
+            self._remember(index, found.uv)
+        elif board is not None:
+            self._remember(index, board)  # the board's place, seen in part: the next prediction starts here
         return found
 
     def predict(self, index: int, shape: tuple) -> Optional[np.ndarray]:
         """Predicted corners of frame `index` (numbered as the last frame's), or None when there is
         no track (no accepted previous frame) or the board would near the image border."""
-        if not self._history or self._history[-1][0] != index - 1:
-            return None
-        last = self._history[-1][1]
-        predicted = last
-        if len(self._history) == 2:
-            before = self._history[0][1]
-            # symmetric boards may be numbered differently in the two frames: match the numbering
-            before = min((before[p] for p in self._reindexings), key=lambda uv: float(np.sum((uv - last) ** 2)))
-            step, _ = cv2.findHomography(before, last, 0)
-            if step is not None and np.all(np.isfinite(step)):
-                predicted = cv2.perspectiveTransform(last.reshape(-1, 1, 2), step).reshape(-1, 2)
-        return predicted if self._inside(predicted, shape) else None
+        predicted = self.extrapolate(index)
+        return predicted if predicted is not None and self._inside(predicted, shape) else None
 
-    def _remember(self, index: int, found: FrameDetection) -> None:
-        if not found.accepted:
-            self._history = []
-            return
+    def extrapolate(self, index: int) -> Optional[np.ndarray]:
+        """Where the board's corners should be in frame `index` (numbered as the last known
+        frame's; anywhere, also outside the image): the last frame-to-frame homography applied
+        once per frame since the last known frame (at most MAX_GAP_FRAMES), or the last corners
+        if only one frame is known; None without a recent track."""
+        if not self._history or not 0 < index - self._history[-1][0] <= MAX_GAP_FRAMES:
+            return None
+        last_index, last = self._history[-1]
+        if len(self._history) < 2 or self._history[0][0] != last_index - 1:
+            return last if index == last_index + 1 else None
+        before = self._history[0][1]
+        # symmetric boards may be numbered differently in the two frames: match the numbering
+        before = min((before[p] for p in self._reindexings), key=lambda uv: float(np.sum((uv - last) ** 2)))
+        step, _ = cv2.findHomography(before, last, 0)
+        if step is None or not np.all(np.isfinite(step)):
+            return last if index == last_index + 1 else None
+        predicted = cv2.perspectiveTransform(last.reshape(-1, 1, 2), np.linalg.matrix_power(step, index - last_index))
+        return predicted.reshape(-1, 2)
+
+    def _remember(self, index: int, uv: np.ndarray) -> None:
+        """The board's corners in frame `index` (detected, tracked, or estimated from its visible
+        part as it leaves the image), kept with the one before if that is frame index - 1."""
         if self._history and self._history[-1][0] != index - 1:
             self._history = []
-        self._history = (self._history + [(index, found.uv)])[-2:]
+        self._history = (self._history + [(index, uv)])[-2:]
+
+    def _partial_board(self, gray: np.ndarray, predicted: np.ndarray) -> Optional[np.ndarray]:
+        """The board's corners (all: the unseen ones from the homography of the seen ones) when
+        it is seen in part at its predicted place: the corners predicted well inside the image
+        (at least 2 rows and 2 columns of them) are found there (within MAX_SHIFT_STEPS, saddles
+        of the board's colour pattern); else None. A corner that lies OUTSIDE_STEPS grid steps
+        beyond the border by this board is not in the image, and a full detection, which needs
+        every corner, would find no board."""
+        rows, cols = self.grid_shape
+        grid = predicted.reshape(rows, cols, 2)
+        step = _min_step(grid)
+        if not np.isfinite(step):
+            return None
+        seen = (_beyond_border(predicted, gray.shape) <= -(2.0 + WIDE_WINDOW_STEPS * step)).reshape(rows, cols)
+        if np.count_nonzero(seen.any(axis=1)) < 2 or np.count_nonzero(seen.any(axis=0)) < 2:
+            return None
+        found = _wide_subpix(gray, predicted[seen.ravel()], self.grid_shape, step)
+        if np.linalg.norm(found - predicted[seen.ravel()], axis=1).max() > MAX_SHIFT_STEPS * step:
+            return None
+        refined = grid.copy()
+        refined[seen] = found
+        if not corners_are_saddles(gray, refined, seen):
+            return None
+        xy = self.detector.target.points_m[:, :2]
+        board, _ = cv2.findHomography(xy[seen.ravel()], found, 0)
+        if board is None or not np.all(np.isfinite(board)):
+            return None
+        return cv2.perspectiveTransform(xy.reshape(-1, 1, 2), board).reshape(-1, 2)
 
     def _inside(self, uv: np.ndarray, shape: tuple) -> bool:
         """Whether every corner lies 0.4 grid steps (and 2 px) inside the image: the refinement
@@ -153,23 +213,43 @@ class CheckerboardTracker:
         return corners_are_saddles(gray, grid)
 
 
-def corners_are_saddles(gray: np.ndarray, grid: np.ndarray) -> bool:
-    """Whether every corner of a (rows, cols, 2) grid is a checkerboard saddle: of the four points
-    0.3 grid steps away along the diagonals, one diagonal pair is brighter than the other by a
-    clear gap, and which pair is bright alternates from corner to corner. A corner of a single
-    square at the board's edge (three bright quadrants) or an occluded corner fails."""
+def _beyond_border(uv: np.ndarray, shape: tuple) -> np.ndarray:
+    """How far (px) each point lies beyond the image border; negative inside (minus its distance to the border)."""
+    height, width = shape[:2]
+    return np.max(np.stack([-uv[:, 0], -uv[:, 1], uv[:, 0] - (width - 1), uv[:, 1] - (height - 1)]), axis=0)
+
+
+def corners_are_saddles(gray: np.ndarray, grid: np.ndarray, mask: Optional[np.ndarray] = None) -> bool:
+    """Whether every corner of a (rows, cols, 2) grid (or those where the (rows, cols) mask is
+    set) is a checkerboard saddle: of the four points 0.3 grid steps away along the diagonals,
+    one diagonal pair is brighter than the other by a clear gap, and which pair is bright
+    alternates from corner to corner. A corner of a single square at the board's edge (three
+    bright quadrants) or an occluded corner fails."""
     along_cols, along_rows = np.gradient(grid, axis=1), np.gradient(grid, axis=0)
     offsets = [along_cols + along_rows, -(along_cols + along_rows), along_cols - along_rows, along_rows - along_cols]
     points = np.stack([grid + 0.3 * o for o in offsets], axis=2).reshape(-1, 4, 2).astype(np.float32)
+    even = (np.add.outer(np.arange(grid.shape[0]), np.arange(grid.shape[1])) % 2 == 0).ravel()
+    if mask is not None:
+        points, even = points[mask.ravel()], even[mask.ravel()]
     values = cv2.remap(gray, points[..., 0], points[..., 1], cv2.INTER_LINEAR,
                        borderMode=cv2.BORDER_REPLICATE).astype(np.float64)  # (n, 4)
     diagonal_bright = values[:, :2].min(1) - values[:, 2:].max(1)   # gap if the diagonal pair is bright
     anti_bright = values[:, 2:].min(1) - values[:, :2].max(1)
-    even = (np.add.outer(np.arange(grid.shape[0]), np.arange(grid.shape[1])) % 2 == 0).ravel()
     gap = max(np.where(even, diagonal_bright, anti_bright), np.where(even, anti_bright, diagonal_bright),
               key=np.median)  # the board's colour convention is the one most corners follow
     contrast = float(np.median(values.max(1) - values.min(1)))
     return contrast >= MIN_CONTRAST and float(gap.min()) >= MIN_SADDLE_GAP * contrast
+
+
+def _wide_subpix(gray: np.ndarray, uv: np.ndarray, grid_shape: tuple, step: Optional[float] = None) -> np.ndarray:
+    """cornerSubPix with a half-window of WIDE_WINDOW_STEPS grid steps (step: the grid's
+    smallest, from uv as a whole grid if not given): pulls predicted corners a few px off
+    onto the corners."""
+    step = _min_step(uv.reshape(*grid_shape, 2)) if step is None else step
+    half_window = int(np.clip(round(WIDE_WINDOW_STEPS * step), 2, 60))
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.05)
+    return cv2.cornerSubPix(gray, uv.astype(np.float32).reshape(-1, 1, 2), (half_window, half_window),
+                            (-1, -1), criteria).reshape(-1, 2).astype(np.float64)
 
 
 def _min_step(grid: np.ndarray) -> float:

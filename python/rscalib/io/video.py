@@ -84,32 +84,93 @@ class FrameSource:
     def _video(self, gray: bool) -> Iterator[Frame]:
         capture = _open_capture(self.paths[0])
         clock = _ContainerClock(self.fps_nominal)
-        index = -1
+        count = 0
         try:
-            while capture.grab():
-                index += 1
-                time_s = clock.time_of(index, capture.get(cv2.CAP_PROP_POS_MSEC))
-                if time_s is None:
-                    yield Frame(index, float("nan"), None, f"frame {index}", "bad_timestamp")
-                    continue
-                ok, image = capture.retrieve()
-                if not ok or image is None:
-                    yield Frame(index, time_s, None, f"frame {index}", "unreadable")
-                    continue
-                if gray and image.ndim == 3:
-                    image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-                yield Frame(index, time_s, image, f"frame {index}")
+            for frame in decode_frames(capture, clock, 0, None, gray):
+                count += 1
+                yield frame
         finally:
             capture.release()
-        if index < 0:
+        if count == 0:
             raise InputError(f"{self.paths[0]}: no frame could be decoded")
         if clock.fallback and clock.warning not in self.warnings:
             self.warnings.append(clock.warning)
             # without a frame rate the times are frame numbers, which the engines that need time refuse
             self.timestamps_source = "frame rate" if clock.fps else "frame index"
-        skipped = f"{clock.non_increasing} frame(s) skipped: container time not increasing"
-        if clock.non_increasing and skipped not in self.warnings:
+        self.note_non_increasing(clock.non_increasing)
+
+    def note_non_increasing(self, count: int) -> None:
+        skipped = f"{count} frame(s) skipped: container time not increasing"
+        if count and skipped not in self.warnings:
             self.warnings.append(skipped)
+
+
+def decode_frames(capture: cv2.VideoCapture, clock: _ContainerClock, first_index: int, stop: Optional[int],
+                  gray: bool) -> Iterator[Frame]:
+    """Frames first_index, first_index + 1, ... (up to stop, or the end) from a capture standing
+    at first_index, with their times from `clock`."""
+    index = first_index
+    while (stop is None or index < stop) and capture.grab():
+        time_s = clock.time_of(index, capture.get(cv2.CAP_PROP_POS_MSEC))
+        if time_s is None:
+            yield Frame(index, float("nan"), None, f"frame {index}", "bad_timestamp")
+        else:
+            ok, image = capture.retrieve()
+            if not ok or image is None:
+                yield Frame(index, time_s, None, f"frame {index}", "unreadable")
+            else:
+                if gray and image.ndim == 3:
+                    image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+                yield Frame(index, time_s, image, f"frame {index}")
+        index += 1
+
+
+class VideoSegment:
+    """Frames start .. stop - 1 of a video file (stop None: to the end) decoded after a frame seek,
+    for a worker that decodes its own part of a video. OpenCV's seek may land on another frame
+    (inter-frame codecs, variable frame rates), so the caller verifies: `first` is the (time,
+    digest of the grey pixels) of the first frame decoded here, `after` that of frame `stop`
+    decoded on from here (None at the end); segment k is where it claims when its `first` equals
+    segment k-1's `after` (which segment 0, decoded from the file's start, vouches for by induction).
+    last_time_s is the clock's last accepted time, against which the next segment's first time
+    must increase, as in one sequential pass."""
+
+    def __init__(self, path, fps: Optional[float], start: int, stop: Optional[int]):
+        self.path, self.fps, self.start, self.stop = path, fps, start, stop
+        self.first: Optional[tuple] = None
+        self.after: Optional[tuple] = None
+        self.last_time_s: Optional[float] = None
+        self.non_increasing = 0
+        self.no_container_times = False
+
+    def frames(self, gray: bool = True) -> Iterator[Frame]:
+        capture = _open_capture(self.path)
+        clock = _ContainerClock(self.fps)
+        try:
+            if self.start > 0 and not capture.set(cv2.CAP_PROP_POS_FRAMES, self.start):
+                return  # first stays None: not verifiable
+            for frame in decode_frames(capture, clock, self.start, self.stop, gray):
+                if frame.index == self.start and frame.image is not None:
+                    self.first = (frame.time_s, frame_digest(frame.image))
+                yield frame
+            if self.stop is not None and capture.grab():
+                ok, image = capture.retrieve()
+                if ok and image is not None:
+                    if gray and image.ndim == 3:
+                        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+                    self.after = (capture.get(cv2.CAP_PROP_POS_MSEC) * 1e-3, frame_digest(image))
+                else:
+                    self.after = (float("nan"), "unreadable")
+        finally:
+            capture.release()
+            self.last_time_s, self.non_increasing, self.no_container_times = clock.last, clock.non_increasing, clock.fallback
+
+
+def frame_digest(image: np.ndarray) -> str:
+    """A short hash of a frame's pixels and shape (tells decoded frames apart)."""
+    digest = hashlib.blake2b(np.ascontiguousarray(image).data, digest_size=16)
+    digest.update(repr(image.shape).encode())
+    return digest.hexdigest()
 
 
 class _ContainerClock:

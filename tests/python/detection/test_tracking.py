@@ -55,7 +55,7 @@ def test_tracked_corners_match_full_detection_and_truth(sequence):
     tracker = CheckerboardTracker(detector)
     for k in range(20):
         tracker.detect(images[k], k)
-    assert tracker.counts == {"full": 1, "tracked": 19, "track_rejected": 0}
+    assert tracker.counts == {"full": 1, "tracked": 19, "track_rejected": 0, "left_image": 0}
     diff = np.concatenate([t.uv - f.uv for t, f in zip(tracked, full)])
     for t, f in zip(tracked, full):
         np.testing.assert_array_equal(t.point_id, f.point_id)
