@@ -1,5 +1,6 @@
-"""Peak memory and map size of self-calibration at 640x480 (issue 11; docs/sog.md §15): the real desk
-video (../shared/data/real_selfcalib_s3phone) played at STEP x speed, forth and back, for FRAMES frames.
+"""Peak memory, map size and speed of self-calibration at 640x480 (issue 11; docs/sog.md §15): the real
+desk video (../shared/data/real_selfcalib_s3phone) played at STEP x speed, forth and back, for FRAMES
+frames. Speed: frames per wall and per CPU second from the first frame with one Gaussian left.
 
 Usage: .venv/bin/python benchmarks/bench_selfcalib_memory.py STEP FRAMES [MAX_FEATURES]
   e.g. 4 1000 (peak RSS at 1000 frames); 12 400 0 (no cap: the map grows) vs 12 400 100.
@@ -27,10 +28,11 @@ def main() -> None:
     if cap is not None:
         options.max_features = cap
     started = time.time()
-    maps = []
+    maps, clocks = [], []
 
     def on_frame(k, bank, report):
         maps.append(bank.num_features)
+        clocks.append((bank.num_gaussians, time.perf_counter(), time.process_time()))
 
     result = self_calibrate(frames, (640, 480), pixel_size_mm=0.0070216, options=options, on_frame=on_frame,
                             restarts=False)
@@ -38,6 +40,13 @@ def main() -> None:
     elapsed = time.time() - started
     print(f"step {step}, {count} frames, max_features {options.max_features}: map max {max(maps)}, "
           f"peak RSS {peak_mb:.0f} MB, {elapsed:.0f} s ({count / elapsed:.1f} frames/s), f {result.mean[0]:.1f} px")
+    pruned = next((k for k, (gaussians, _, _) in enumerate(clocks) if gaussians == 1), None)
+    if pruned is not None and pruned < len(clocks) - 1:
+        frames_after = len(clocks) - 1 - pruned
+        wall = clocks[-1][1] - clocks[pruned][1]
+        cpu = clocks[-1][2] - clocks[pruned][2]
+        print(f"one Gaussian from frame {pruned}: then {frames_after / wall:.1f} frames per wall second, "
+              f"{frames_after / cpu:.1f} per CPU second ({frames_after} frames)")
 
 
 if __name__ == "__main__":
