@@ -1,6 +1,7 @@
 """Interrupts and the CLI's last line of defence (issue #14).
 
-`rscalib linedelay` on a small rendered video is stopped in the middle of detection by SIGTERM,
+`rscalib linedelay` on a small rendered video (long enough for the workers to decode their own segments
+of it) is stopped in the middle of detection by SIGTERM,
 Ctrl-C (SIGINT to the process group, as a terminal sends it) or SIGKILL: the exit code is 143 / 130
 (SIGKILL: the kernel's), no traceback is printed, no detection worker survives (read from /proc),
 and no result.json is written. In process: any exception becomes one line and an exit code."""
@@ -36,7 +37,7 @@ def rscalib_env() -> dict:
 @pytest.fixture(scope="module")
 def video(tmp_path_factory):
     out = tmp_path_factory.mktemp("sim")
-    subprocess.run([sys.executable, "-m", "rscalib", "simulate", "--out", str(out), "--duration", "3",
+    subprocess.run([sys.executable, "-m", "rscalib", "simulate", "--out", str(out), "--duration", "6",
                     "--supersample", "1", "--quiet"], check=True, env=rscalib_env(), timeout=300)
     return out
 
@@ -92,6 +93,22 @@ def survivors(pids: list[int], within_s: float) -> list[int]:
     while time.monotonic() < deadline and any(running(p) for p in pids):
         time.sleep(0.05)
     return [p for p in pids if running(p)]
+
+
+def test_the_video_is_detected_in_worker_segments(video):
+    """The interrupts below hit workers that decode their own segments (issue 17), not only the
+    frames-shipped path."""
+    import cv2
+
+    from rscalib.detection.detectors import DetectOptions
+    from rscalib.detection.pipeline import segment_plan
+    from rscalib.detection.tracking import run_length
+    from rscalib.io.targets import load_target
+
+    capture = cv2.VideoCapture(str(video / "video.avi"))
+    frames = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+    capture.release()
+    assert segment_plan(frames, 2, run_length(load_target(video / "target.yaml"), DetectOptions())) is not None
 
 
 @pytest.mark.parametrize("how, exit_code, last_line", [("SIGTERM", 143, "rscalib: terminated"),
