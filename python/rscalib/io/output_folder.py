@@ -8,7 +8,8 @@
   a folder with a result.json is always one complete run. The previous run's files that the new run
   does not write are removed, as listed in the manifest `.rscalib-outputs.json`; files rscalib did
   not write are never touched. A failure or an interrupt removes the staging folder and leaves the
-  previous set as it was.
+  previous set as it was. Two runs into the same folder commit one after the other (a lock on
+  `.rscalib-lock`), so the folder holds the whole set of whichever finished last.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from ..errors import InputError
 from .results import RESULT_FILE  # the marker of a complete set
 
 MANIFEST = ".rscalib-outputs.json"
+LOCK = ".rscalib-lock"
 STAGING_PREFIX = ".rscalib-staging-"
 MB = 1 << 20
 
@@ -165,6 +167,23 @@ def _commit(staging: Path, out: Path, last: str) -> None:
         os.replace(staging / last, out / last)
 
 
+@contextlib.contextmanager
+def _commit_lock(out: Path) -> Iterator[None]:
+    """Held while a set is moved into `out`: two runs writing the same folder at once would
+    otherwise interleave their files (flock: released by the kernel if the process dies)."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock
+        yield
+        return
+    with open(out / LOCK, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
 def _output_error(error: OSError, staging: Path, out: Path) -> InputError:
     """An OSError of writing, as one line naming the file (its final name) and the reason."""
     reason = error.strerror or str(error)
@@ -194,7 +213,8 @@ def output_set(out_dir, last: str = RESULT_FILE) -> Iterator[Path]:
         raise InputError(f"cannot write in {out}: {error.strerror or error}") from None
     try:
         yield staging
-        _commit(staging, out, last)
+        with _commit_lock(out):
+            _commit(staging, out, last)
     except OSError as error:
         raise _output_error(error, staging, out) from None
     finally:

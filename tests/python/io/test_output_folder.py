@@ -13,7 +13,7 @@ import pytest
 from rscalib.cli import main
 from rscalib.errors import InputError
 from rscalib.io import output_folder
-from rscalib.io.output_folder import MANIFEST, check_output_folder, expected_output_bytes, output_set
+from rscalib.io.output_folder import LOCK, MANIFEST, check_output_folder, expected_output_bytes, output_set
 from rscalib.io.results import write_result_json
 
 MB = 1 << 20
@@ -105,12 +105,60 @@ def test_a_second_run_replaces_the_first_as_a_set(tmp_path):
     write_set(out, ["report.html", "knots_speed.png", "trajectory.csv"], "spline")
     (out / "notes.txt").write_text("mine")            # the user's own file
     write_set(out, ["report.html", "trajectory.csv"], "linear")
-    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "notes.txt", "report.html", "result.json",
-                                                     "trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir()) == sorted([MANIFEST, LOCK, "notes.txt", "report.html",
+                                                            "result.json", "trajectory.csv"])
     assert (out / "report.html").read_text() == "linear report.html"
     assert json.loads((out / "result.json").read_text())["marker"] == "linear"
     assert (out / "notes.txt").read_text() == "mine"
     assert json.loads((out / MANIFEST).read_text())["files"] == ["report.html", "result.json", "trajectory.csv"]
+
+
+def test_two_runs_into_one_folder_commit_one_after_the_other(tmp_path, monkeypatch):
+    """Run A is held in the middle of moving its files into place; run B, finishing meanwhile, must
+    wait for the folder's lock (it moves nothing until A is done), and the folder ends as B's whole
+    set. Without the lock B's files would land between A's."""
+    import threading
+
+    out = tmp_path / "out"
+    out.mkdir()
+    a_moving, release = threading.Event(), threading.Event()
+    moved = []   # (run, file name) in the order they were moved into `out`
+    real_replace = os.replace
+
+    def replace(source, target):
+        if Path(target).parent != out:   # a write inside a staging folder, not a move into `out`
+            return real_replace(source, target)
+        run = threading.current_thread().name
+        moved.append((run, Path(target).name))
+        if run == "A" and not a_moving.is_set():
+            a_moving.set()
+            release.wait(timeout=30)
+        return real_replace(source, target)
+
+    monkeypatch.setattr(output_folder.os, "replace", replace)
+
+    def run(name, files):
+        with output_set(out) as staged:
+            for f in files:
+                (staged / f).write_text(f"{name} {f}")
+            write_result_json(staged, {"marker": name}, command="test")
+
+    a = threading.Thread(target=run, name="A", args=("A", [f"a{i}.txt" for i in range(20)] + ["shared.txt"]))
+    b = threading.Thread(target=run, name="B", args=("B", [f"b{i}.txt" for i in range(20)] + ["shared.txt"]))
+    a.start()
+    assert a_moving.wait(timeout=30)
+    b.start()
+    b.join(timeout=1.0)   # B has staged its files and reached the commit by now
+    assert b.is_alive() and not [name for run_, name in moved if run_ == "B"]
+    release.set()
+    a.join(timeout=30)
+    b.join(timeout=30)
+    runs = [run_ for run_, _ in moved]
+    assert runs == sorted(runs)   # all of A's moves, then all of B's
+    assert json.loads((out / "result.json").read_text())["marker"] == "B"
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        [MANIFEST, LOCK, "result.json", "shared.txt"] + [f"b{i}.txt" for i in range(20)])
+    assert (out / "shared.txt").read_text() == "B shared.txt"
 
 
 def test_a_failed_run_leaves_the_previous_set_whole(tmp_path):
@@ -165,7 +213,7 @@ def test_a_kill_while_moving_the_files_in_leaves_no_result_json(tmp_path, monkey
     monkeypatch.setattr(output_folder.os, "replace", real_replace)
     assert not (out / "result.json").exists()      # the folder does not look complete
     write_set(out, ["c.txt"], "third")               # the next run still knows every file rscalib wrote
-    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "c.txt", "result.json"]
+    assert sorted(p.name for p in out.iterdir()) == sorted([MANIFEST, LOCK, "c.txt", "result.json"])
 
 
 def test_a_damaged_manifest_cannot_delete_outside_the_folder(tmp_path):
