@@ -94,6 +94,10 @@ def summarise(rows: list[dict]) -> dict:
     est = [r for r in moving if r.get("z") is not None]
     within = [r for r in est if abs(r["z"]) <= 3]
     agree = [r for r in within if r.get("halves_agree")]
+    # The self-check's false alarms: runs whose estimate is good by the solver's own sigma, before the
+    # check widened it (a run within 3 sigma only thanks to that widening is an alarm that was right).
+    solver_within = [r for r in est if r.get("solver_std_us") and
+                     abs(r["d_us"] - r["line_delay_us"]) <= 3 * r["solver_std_us"]]
     static_ok = [r for r in static if r["exit"] == 3 or (r.get("z") is not None and abs(r["z"]) <= 3)]
     rel = np.array([r["rel_err"] for r in est]) if est else np.zeros(0)
     return {
@@ -102,6 +106,10 @@ def summarise(rows: list[dict]) -> dict:
         "median_rel_error": float(np.median(rel)) if rel.size else math.nan,
         "p95_rel_error": float(np.percentile(rel, 95)) if rel.size else math.nan,
         "halves_agree_when_within": len(agree) / max(1, len(within)),
+        "within_3_solver_sigma": len(solver_within),
+        "halves_agree_when_within_solver_sigma":
+            sum(bool(r.get("halves_agree")) for r in solver_within) / max(1, len(solver_within)),
+        "halves_disagree": [r["name"] for r in est if r.get("halves_agree") is False],
         "exit_codes": {str(c): sum(r["exit"] == c for r in moving) for c in sorted({r["exit"] for r in moving})},
         "near_static": len(static), "near_static_flagged_or_within": len(static_ok),
         "near_static_exit_codes": [r["exit"] for r in static],

@@ -317,6 +317,26 @@ def _folder(folder: Path) -> FrameSource:
     return FrameSource("images", images, "frame index", len(images), None, np.arange(len(images), dtype=np.float64))
 
 
+def video_bits_per_pixel(source) -> Optional[float]:
+    """The bitrate of a video file per pixel and frame (bitrate / (width · height · fps)), from its
+    container (OpenCV's CAP_PROP_BITRATE, which includes any audio: a few % high); None for image
+    sequences or when the container does not say."""
+    path = Path(source) if isinstance(source, (str, Path)) else None
+    if path is None or not path.is_file() or _is_image(path):
+        return None
+    capture = cv2.VideoCapture(str(path))
+    try:
+        if not capture.isOpened():
+            return None
+        kbit_s, fps = capture.get(cv2.CAP_PROP_BITRATE), capture.get(cv2.CAP_PROP_FPS)
+        pixels = capture.get(cv2.CAP_PROP_FRAME_WIDTH) * capture.get(cv2.CAP_PROP_FRAME_HEIGHT)
+    finally:
+        capture.release()
+    if not (kbit_s > 0 and fps > 0 and pixels > 0 and np.isfinite(kbit_s * fps * pixels)):
+        return None
+    return float(kbit_s * 1e3 / (pixels * fps))
+
+
 def _video_source(path: Path) -> FrameSource:
     if not path.is_file():
         raise InputError(f"{path}: not a file")

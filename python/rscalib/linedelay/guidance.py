@@ -19,6 +19,9 @@ MIN_SPEED_PX_S = 150.0       # median image speed below this: too slow
 MAX_BLURRED_FRACTION = 0.2   # frames with edges wider than BLURRED_PX
 BLURRED_PX = 4.0
 MAX_DROPPED_FRACTION = 0.2
+# Below this the video was likely re-encoded (a phone records about 0.2-0.4 bit/pixel): on renders the
+# line-delay error at 0.12 bit/pixel is about twice that at 0.25 (docs/experiments.md).
+MIN_BITS_PER_PIXEL = 0.15
 
 
 def angular_rates(result, samples: int = 400) -> Optional[np.ndarray]:
@@ -35,9 +38,10 @@ def angular_rates(result, samples: int = 400) -> Optional[np.ndarray]:
     return np.array([rotation_matrix_to_vector(r) for r in rel]) / dt
 
 
-def capture_guidance(result, detection=None) -> dict:
-    """Coverage, motion, blur and drops of a line-delay result (spline or linear) and the detection
-    it came from, with `advice`: sentences a user can act on (empty when the video is fine)."""
+def capture_guidance(result, detection=None, bits_per_pixel: Optional[float] = None) -> dict:
+    """Coverage, motion, blur, drops and compression of a line-delay result (spline or linear), the
+    detection it came from and the video's bitrate per pixel (io.video.video_bits_per_pixel), with
+    `advice`: sentences a user can act on (empty when the video is fine)."""
     obs = result.used_observations
     rows = int(result.rows)
     v = obs.uv[:, 1]
@@ -89,5 +93,11 @@ def capture_guidance(result, detection=None) -> dict:
             reasons = ", ".join(f"{k} {n}" for k, n in sorted(dropped.items(), key=lambda kv: -kv[1]))
             advice.append(f"{lost} of {total} frames had no usable board ({reasons}): keep the whole board in view "
                           "and sharp")
+    if bits_per_pixel is not None:
+        out["video_bits_per_pixel"] = float(bits_per_pixel)
+        if bits_per_pixel < MIN_BITS_PER_PIXEL:
+            advice.append(f"the video is compressed to {bits_per_pixel:.2f} bit/pixel, below what phones record "
+                          "(about 0.2-0.4): if it was re-encoded (a messaging app, an editor), use the camera's "
+                          "original file, or record at a higher quality setting")
     out["advice"] = advice
     return out

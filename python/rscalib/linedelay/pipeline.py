@@ -29,7 +29,7 @@ from ..detection.result import DetectionResult
 from ..errors import InputError
 from ..io.cameras import load_camera
 from ..io.targets import Target, load_target
-from ..io.video import open_source
+from ..io.video import open_source, video_bits_per_pixel
 from . import selfcheck
 from .common import (
     UNDETERMINED_STD_FRACTION,
@@ -228,7 +228,7 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
     result.warnings[:0] = notes
     run = VideoResult(model, result, camera_model, detection, _inputs(video, target, camera), settings)
     try:
-        run.guidance = capture_guidance(result, detection)
+        run.guidance = capture_guidance(result, detection, video_bits_per_pixel(video))
     except Exception as error:  # noqa: BLE001 - advice must never cost the result
         run.guidance = {"advice": [], "error": f"{type(error).__name__}: {error}"}
     return run

@@ -14,9 +14,11 @@ recording of a board on a laptop screen is degraded (issue 12):
   **timestamp noise** (the recorded time of a frame differs from its capture time);
 - optionally **electronic stabilisation**: a small, smooth per-frame similarity warp of the image
   (which the rolling-shutter model does not know about);
-- **H.264 at phone bitrates** (libx264 through the ffmpeg binary of the ``imageio-ffmpeg``
-  package when it is installed; otherwise OpenCV's MPEG-4 part 2 at a similar bitrate, recorded
-  as such in truth.json).
+- **H.264 as a phone records it** (libx264 through the ffmpeg binary of the ``imageio-ffmpeg``
+  package when it is installed; otherwise OpenCV's MPEG-4 part 2, recorded as such in truth.json).
+  The defaults copy the one real phone recording we have (``../shared/data/real_selfcalib_s3phone``:
+  Baseline profile, P frames only, a key frame every second, 2.02 Mbit/s at 640×480 and 30 fps,
+  i.e. 0.22 bit/pixel); lower bitrates stand for videos re-encoded by a messaging app.
 
 The decoded frames are written as PNG with ``timestamps.txt`` (the recorded, noisy times: a phone's
 container carries per-frame times, which AVI cannot), so `rscalib linedelay OUT/frames` sees what a
@@ -73,7 +75,8 @@ class RealismOptions:
     screen_white: float = 0.80
     screen_falloff: float = 0.25        # brightness drop at the screen's edges (viewing angle)
     vignetting: float = 0.3             # brightness drop at the image corners
-    bits_per_pixel: float = 0.12        # video bitrate / (width * height * fps): ~1 Mbps at 640x480x30
+    bits_per_pixel: float = 0.22        # video bitrate / (width * height * fps): the S3 phone's 2.0 Mbit/s at 640x480x30
+    h264_profile: str = "baseline"      # the S3 phone's: no B frames (x264 "high" adds them)
     jitter_s: float = 0.3e-3            # sigma of the capture time around i / fps
     drop_probability: float = 0.01      # frames the phone skipped
     timestamp_noise_s: float = 0.05e-3  # sigma of recorded time - capture time
@@ -194,9 +197,9 @@ def _ffmpeg() -> Optional[str]:
 
 
 def encode_decode(frames: Sequence[np.ndarray], fps: float, bits_per_pixel: float, path: Path,
-                  codec: str = "auto") -> tuple[list[np.ndarray], str]:
-    """Compress the grey frames as a phone would (H.264, bitrate = bits_per_pixel · w · h · fps,
-    GOP of one second) into `path`, and decode them again: (decoded frames, codec used)."""
+                  codec: str = "auto", h264_profile: str = "baseline") -> tuple[list[np.ndarray], str]:
+    """Compress the grey frames as a phone would (H.264 of `h264_profile`, bitrate = bits_per_pixel
+    · w · h · fps, GOP of one second) into `path`, and decode them again: (decoded frames, codec used)."""
     if codec == "none":
         return list(frames), "none"
     height, width = frames[0].shape
@@ -204,7 +207,7 @@ def encode_decode(frames: Sequence[np.ndarray], fps: float, bits_per_pixel: floa
     exe = _ffmpeg() if codec in ("auto", "h264") else None
     if exe is not None:
         encode = [exe, "-hide_banner", "-loglevel", "error", "-y", "-f", "rawvideo", "-pix_fmt", "gray",
-                  "-s", f"{width}x{height}", "-r", f"{fps:.6f}", "-i", "-", "-c:v", "libx264", "-preset", "fast",
+                  "-s", f"{width}x{height}", "-r", f"{fps:.6f}", "-i", "-", "-c:v", "libx264", "-preset", "fast", "-profile:v", h264_profile,
                   "-b:v", str(bitrate), "-maxrate", str(int(1.5 * bitrate)), "-bufsize", str(2 * bitrate),
                   "-g", str(max(1, int(round(fps)))), "-pix_fmt", "yuv420p", str(path)]
         done = subprocess.run(encode, input=b"".join(f.tobytes() for f in frames), capture_output=True)
@@ -214,7 +217,7 @@ def encode_decode(frames: Sequence[np.ndarray], fps: float, bits_per_pixel: floa
             raw = subprocess.run(decode, capture_output=True, check=True).stdout
             out = np.frombuffer(raw, dtype=np.uint8).reshape(-1, height, width)
             if len(out) == len(frames):
-                return [f.copy() for f in out], f"h264 (libx264, {bitrate / 1e6:.2f} Mbit/s)"
+                return [f.copy() for f in out], f"h264 (libx264 {h264_profile}, {bitrate / 1e6:.2f} Mbit/s)"
         if codec == "h264":
             raise InputError(f"ffmpeg could not encode H.264: {done.stderr.decode(errors='replace')[:200]}")
     elif codec == "h264":
@@ -305,7 +308,8 @@ def render_realistic_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30
     finally:
         renderer.close()
     video_path = out / "video.mp4"
-    decoded, codec = encode_decode(frames, fps, options.bits_per_pixel, video_path, options.codec)
+    decoded, codec = encode_decode(frames, fps, options.bits_per_pixel, video_path, options.codec,
+                                   options.h264_profile)
     for i, image in enumerate(decoded):
         cv2.imwrite(str(frames_dir / f"frame_{i:06d}.png"), image)
     (frames_dir / "timestamps.txt").write_text("".join(f"{t:.9f}\n" for t in recorded))

@@ -341,7 +341,8 @@ def render_realistic_scene(out_dir: Union[str, Path], style: str = "look-around"
                                    phone, vignette))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    decoded, codec = encode_decode(frames, fps, phone.bits_per_pixel, out / "video.mp4", phone.codec)
+    decoded, codec = encode_decode(frames, fps, phone.bits_per_pixel, out / "video.mp4", phone.codec,
+                                   phone.h264_profile)
     names = []
     for i, image in enumerate(decoded):
         names.append(f"frame_{i:06d}.png")

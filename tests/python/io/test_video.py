@@ -246,3 +246,16 @@ def test_image_over_opencvs_pixel_limit_is_an_input_error_naming_the_file(tmp_pa
     path.write_bytes(_header_only_png(40000, 40000))
     with pytest.raises(InputError, match="huge.png"):
         list(open_source([path]).frames())
+
+
+def test_bits_per_pixel_from_the_container_matches_the_file_size(tmp_path):
+    """The video's bitrate per pixel (the linedelay advice on re-encoded videos), against its file size
+    over its duration; None for an image folder."""
+    from rscalib.io.video import video_bits_per_pixel
+    count, fps, size = 50, 25.0, (160, 120)
+    path = write_avi(tmp_path / "v.avi", count, fps, size)
+    from_size = path.stat().st_size * 8 / (count / fps) / (size[0] * size[1] * fps)
+    assert video_bits_per_pixel(path) == pytest.approx(from_size, rel=0.1)
+    cv2.imwrite(str(tmp_path / "a.png"), gradient_frame(0))
+    assert video_bits_per_pixel(tmp_path / "a.png") is None
+    assert video_bits_per_pixel(tmp_path) is None

@@ -46,6 +46,12 @@ def test_calibrate_video_is_detect_then_the_engine(video, tmp_path):
     assert run.settings == {"trajectory_model": "spline", "standardise_errors": True, "motion_prior": True,
                             "adaptive_knots": True, "noise_model": "frame", "readout": "top-down",
                             "start_s": None, "end_s": None}
+    # the lossless render is far above a phone's bitrate; a re-encoded video would be named
+    assert run.guidance["video_bits_per_pixel"] > 1.0
+    assert not any("bit/pixel" in line for line in run.guidance["advice"])
+    from rscalib.linedelay.guidance import capture_guidance
+    low = capture_guidance(run.result, run.detection, bits_per_pixel=0.1)
+    assert any("compressed to 0.10 bit/pixel" in line for line in low["advice"])
 
 
 def test_the_self_check_is_the_same_alongside_the_whole_solve_or_after_it(video, tmp_path, monkeypatch):
