@@ -54,6 +54,8 @@ void BindRs(py::module_& m) {
                      "Jacobian chained through the basis weights (false: full autodiff)")
       .def_readwrite("schur_variance", &RsSolverOptions::schur_variance,
                      "sigma_d from the Schur complement (false: Ceres' covariance)")
+      .def_readwrite("line_delay_score", &RsSolverOptions::line_delay_score,
+                     "also each observation's score of d (summary.line_delay_score)")
       .def_readwrite("verbose", &RsSolverOptions::verbose)
       .def_readwrite("refine_intrinsics", &RsSolverOptions::refine_intrinsics,
                      "refine the camera's parameters jointly (docs/formulation.md §14)")
@@ -75,6 +77,7 @@ void BindRs(py::module_& m) {
       .def_readonly("line_delay_s", &RsSolveSummary::line_delay_s)
       .def_readonly("line_delay_std_s", &RsSolveSummary::line_delay_std_s)
       .def_readonly("covariance_ok", &RsSolveSummary::covariance_ok)
+      .def_readonly("line_delay_score", &RsSolveSummary::line_delay_score)
       .def_readonly("measurement_cost", &RsSolveSummary::measurement_cost)
       .def_readonly("prior_cost", &RsSolveSummary::prior_cost)
       .def_readonly("num_error_terms", &RsSolveSummary::num_error_terms)

@@ -198,6 +198,14 @@ class RsSolverOptions:
     def intrinsics_prior_mean(self, arg0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"]) -> None:
         ...
     @property
+    def line_delay_score(self) -> bool:
+        """
+        also each observation's score of d (summary.line_delay_score)
+        """
+    @line_delay_score.setter
+    def line_delay_score(self, arg0: bool) -> None:
+        ...
+    @property
     def max_iterations(self) -> int:
         ...
     @max_iterations.setter
@@ -315,6 +323,9 @@ class RsSolveSummary:
         """
     @property
     def line_delay_s(self) -> float:
+        ...
+    @property
+    def line_delay_score(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]"]:
         ...
     @property
     def line_delay_std_s(self) -> float:

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <memory>
 #include <optional>
+#include <unordered_map>
+#include <vector>
 
 #include <ceres/ceres.h>
 
@@ -239,18 +241,25 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
     for (size_t i = 0; i < attached.size(); ++i) previous_span[i] = attached[i].span;
     return reattached != 0;
   };
+  // Which observations each measurement block holds: the per-observation scores of d.
+  std::unordered_map<ceres::ResidualBlockId, std::vector<int>> block_observations;
   const auto add_residuals = [&](ceres::Problem* problem, ceres::LossFunction* loss) {
+    block_observations.clear();
     if (intrinsics) intrinsics->AddTo(problem);
     // Plain least squares with the analytic Jacobian: one residual block per run of observations
     // with the same frame time and span (RsReprojectionGroupCost), the same sum of squares.
     const bool group = options.analytic_jacobian && !loss && !intrinsics;
     std::vector<AnalyticReprojectionTerm> members;
+    std::vector<int> member_observations;
     const auto flush_group = [&](int span) {
       if (members.empty()) return;
       double* c0 = control + 6 * (span - 3);
-      problem->AddResidualBlock(new RsReprojectionGroupCost(std::move(members)), nullptr, c0,
-                                c0 + 6, c0 + 12, c0 + 18, line_delay_s);
+      const ceres::ResidualBlockId id =
+          problem->AddResidualBlock(new RsReprojectionGroupCost(std::move(members)), nullptr, c0,
+                                    c0 + 6, c0 + 12, c0 + 18, line_delay_s);
+      if (options.line_delay_score) block_observations[id] = std::move(member_observations);
       members.clear();
+      member_observations.clear();
     };
     int group_span = -1;
     double group_frame_time_s = 0.0;
@@ -270,6 +279,7 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
           group_frame_time_s = observations.frame_time_s[m];
         }
         members.emplace_back(basis, cam, frame_offset_s, uv, point_w, a.error.sqrt_information);
+        if (options.line_delay_score) member_observations.push_back(static_cast<int>(m));
         continue;
       }
       if (intrinsics) {
@@ -285,7 +295,9 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
                                                a.error.sqrt_information)
               : RsReprojectionCost::Create(basis, cam, frame_offset_s, uv, point_w,
                                            a.error.sqrt_information);
-      problem->AddResidualBlock(cost, loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s);
+      const ceres::ResidualBlockId id =
+          problem->AddResidualBlock(cost, loss, c0, c0 + 6, c0 + 12, c0 + 18, line_delay_s);
+      if (options.line_delay_score) block_observations[id] = {static_cast<int>(m)};
     }
     flush_group(group_span);
     if (options.use_motion_prior) {
@@ -302,9 +314,14 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
   if (intrinsics)
     settings.joint_covariance_blocks = {{intrinsics->value.data(), kIntrinsicsBlockSize}};
   settings.schur_variance = options.schur_variance && !intrinsics;
+  if (options.line_delay_score) {
+    settings.block_observations = &block_observations;
+    settings.num_observations = static_cast<int>(observations.uv.rows());
+  }
   const detail::SolveResult result =
       detail::SolveWithCovariance(settings, line_delay_s, started, reattach, add_residuals);
   result.CopyTo(&summary);
+  summary.line_delay_score = result.line_delay_score;
 
   if (intrinsics) {
     const camera::CameraModel refined = intrinsics->Current();

@@ -86,7 +86,10 @@ std::optional<Eigen::MatrixXd> JointCovariance(
 
 }  // namespace
 
-std::optional<double> SchurVariance(ceres::Problem* problem, double* line_delay, int num_threads) {
+std::optional<double> SchurVariance(
+    ceres::Problem* problem, double* line_delay, int num_threads,
+    const std::unordered_map<ceres::ResidualBlockId, std::vector<int>>* block_observations,
+    int num_observations, Eigen::MatrixX2d* score) {
   // Columns: d first, then the other blocks in the problem's order.
   std::vector<double*> all_blocks;
   problem->GetParameterBlocks(&all_blocks);
@@ -140,6 +143,45 @@ std::optional<double> SchurVariance(ceres::Problem* problem, double* line_delay,
   const double schur = h_dd - scaled_h_cd.dot(ldlt.solve(scaled_h_cd));
   // Not determined (or lost to rounding): let the rank-revealing path decide.
   if (!(schur > 1e-14 * h_dd) || !std::isfinite(schur)) return std::nullopt;
+  if (block_observations != nullptr && score != nullptr) {
+    // g = H^{-1} e_d = [1; -H_cc^{-1} h_cd] / schur; a second pass over the Jacobian (chunked
+    // as above, so memory stays bounded) gives each row's (J_i g) r_i.
+    Eigen::VectorXd g(num_cols);
+    g(0) = 1.0;
+    g.tail(n) = -scale.cwiseProduct(ldlt.solve(scaled_h_cd));
+    g /= schur;
+    score->setZero(num_observations, 2);
+    for (size_t begin = 0; begin < residual_blocks.size(); begin += kChunk) {
+      const size_t end = std::min(residual_blocks.size(), begin + kChunk);
+      evaluate_options.residual_blocks.assign(residual_blocks.begin() + begin,
+                                              residual_blocks.begin() + end);
+      std::vector<double> residuals;
+      ceres::CRSMatrix jacobian;
+      if (!problem->Evaluate(evaluate_options, nullptr, &residuals, nullptr, &jacobian)) {
+        score->resize(0, 2);
+        break;
+      }
+      const Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>> j(
+          jacobian.num_rows, jacobian.num_cols, static_cast<Eigen::Index>(jacobian.values.size()),
+          jacobian.rows.data(), jacobian.cols.data(), jacobian.values.data());
+      const Eigen::VectorXd influence = j * g;
+      int row = 0;
+      for (size_t b = begin; b < end; ++b) {
+        const int rows =
+            problem->GetCostFunctionForResidualBlock(residual_blocks[b])->num_residuals();
+        const auto found = block_observations->find(residual_blocks[b]);
+        if (found != block_observations->end()) {
+          for (size_t k = 0; k < found->second.size() && 2 * static_cast<int>(k) + 1 < rows; ++k) {
+            const int obs = found->second[k];
+            if (obs < 0 || obs >= num_observations) continue;
+            for (int c = 0; c < 2; ++c)
+              (*score)(obs, c) += influence(row + 2 * k + c) * residuals[row + 2 * k + c];
+          }
+        }
+        row += rows;
+      }
+    }
+  }
   return 1.0 / schur;
 }
 
@@ -226,7 +268,9 @@ SolveResult SolveWithCovariance(const SolveSettings& settings, double* line_dela
     } else {
       std::optional<double> variance;
       if (settings.schur_variance && !loss)
-        variance = SchurVariance(problem.get(), line_delay_s, settings.num_threads);
+        variance = SchurVariance(problem.get(), line_delay_s, settings.num_threads,
+                                 settings.block_observations, settings.num_observations,
+                                 &result.line_delay_score);
       if (!variance) variance = ScalarVariance(problem.get(), line_delay_s, settings.num_threads);
       if (variance) {
         result.line_delay_std_s = std::sqrt(*variance);

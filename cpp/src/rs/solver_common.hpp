@@ -15,6 +15,7 @@
 #include <limits>
 #include <optional>
 #include <string>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -49,6 +50,11 @@ struct SolveSettings {
   // The variance of d from the Schur complement of the normal equations (no robust loss, no
   // joint blocks), Ceres' covariance when that is not possible. false: Ceres' covariance.
   bool schur_variance = false;
+  // Optional, with schur_variance: which observations (rows 2k, 2k + 1 of the block's residual
+  // are observation k of the list) each measurement block holds, filled by AddResiduals; then
+  // SolveResult::line_delay_score holds each observation's score for d (SchurVariance).
+  const std::unordered_map<ceres::ResidualBlockId, std::vector<int>>* block_observations = nullptr;
+  int num_observations = 0;
 };
 
 // From the options both solvers have (RsSolverOptions, LinearInterpOptions): DOGLEG on
@@ -152,6 +158,8 @@ struct SolveResult {
   // With SolveSettings::joint_covariance_blocks: the covariance of [d, those blocks] (ambient
   // sizes, in order); empty when not asked for or not computable.
   Eigen::MatrixXd joint_covariance;
+  // With SolveSettings::block_observations: (num_observations, 2) scores of d; empty otherwise.
+  Eigen::MatrixX2d line_delay_score;
 
   template <typename Summary>
   void CopyTo(Summary* summary) const {
@@ -171,7 +179,17 @@ struct SolveResult {
 // plain least-squares problem `problem` (no loss functions, no manifolds): 1 / (h_dd - h_dc
 // H_cc^{-1} h_cd), with H_cc the rest (sparse LDLT after Jacobi scaling). nullopt when H_cc is
 // not positive definite; +inf when d is not determined (Schur complement <= 1e-14 h_dd).
-std::optional<double> SchurVariance(ceres::Problem* problem, double* line_delay, int num_threads);
+//
+// With `block_observations` (see SolveSettings) also fills `score` (num_observations x 2): the
+// linearised contribution of each observation's u and v error to the estimate of d, s_i =
+// (J_i g) r_i with g = H^{-1} e_d (whitened J, r), so that d_hat - d = -sum_i s_i to first order
+// and the variance of 1 / schur is sum_i E[s_i^2] for independent errors. Sums over groups of
+// observations (frames, time windows) give a cluster-robust variance of d (docs/formulation.md).
+std::optional<double> SchurVariance(
+    ceres::Problem* problem, double* line_delay, int num_threads,
+    const std::unordered_map<ceres::ResidualBlockId, std::vector<int>>* block_observations =
+        nullptr,
+    int num_observations = 0, Eigen::MatrixX2d* score = nullptr);
 
 // Called at the start of every outer iteration: re-linearise at the current estimate
 // (attach / pair every observation, recompute the weights) and return whether any

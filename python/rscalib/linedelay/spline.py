@@ -106,6 +106,8 @@ class LineDelayResult:
     # (start, estimate, sigma, prior, covariance of [d, intrinsics]); None when the camera was known.
     camera: Optional[CameraModel] = field(default=None, repr=False)
     intrinsics: Optional[dict] = None
+    # (M, 2) each used observation's linearised contribution to d (C++ SchurVariance); empty if not computed
+    line_delay_score: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
 
     @property
     def num_segments(self) -> int:
@@ -205,6 +207,7 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                          noise_model: str = "frame",
                          refine_intrinsics: bool = False,
                          intrinsics_prior: Optional[IntrinsicsPrior] = None,
+                         line_delay_score: bool = False,
                          progress: Optional[Callable[[RoundRecord], None]] = None) -> LineDelayResult:
     """Estimate the line delay d (s/row) and the continuous-time trajectory (Oth et al. 2013 §3-4).
 
@@ -223,6 +226,8 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
     `camera` as the start, with the prior `intrinsics_prior` (common.IntrinsicsPrior; default:
     common.default_intrinsics_prior, sigma_f 2 %, sigma_c 10 px); the result's `camera` and
     `intrinsics` (with the covariance of [d, intrinsics]) hold the outcome (docs/formulation.md §14).
+    line_delay_score: also return each observation's linearised contribution to d
+    (`result.line_delay_score`, for experiments on correlated errors: docs/experiments.md).
     progress: called after each round.
     """
     return _run(observations, camera, rows, estimate=True, pixel_sigma=pixel_sigma,
@@ -232,7 +237,8 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                 standardise_errors=standardise_errors,
                 use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
                 robust_loss=robust_loss, num_threads=num_threads, noise_model=noise_model,
-                refine_intrinsics=refine_intrinsics, intrinsics_prior=intrinsics_prior, progress=progress)
+                refine_intrinsics=refine_intrinsics, intrinsics_prior=intrinsics_prior,
+                line_delay_score=line_delay_score, progress=progress)
 
 
 def localize(observations: Observations, camera: CameraModel, rows: Optional[int] = None,
@@ -248,7 +254,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
          initial_segments_per_s=None, num_segments=None, adaptive_knots=True, max_rounds=8,
          min_segment_s=None, split_margin_sigmas=2.0, standardise_errors=True, use_motion_prior=True,
          motion_prior_q=DEFAULT_MOTION_PRIOR_Q, robust_loss="none", num_threads=2, noise_model="frame",
-         refine_intrinsics=False, intrinsics_prior=None, progress=None) -> LineDelayResult:
+         refine_intrinsics=False, intrinsics_prior=None, line_delay_score=False, progress=None) -> LineDelayResult:
     if noise_model not in NOISE_MODELS:
         raise InputError(f"unknown noise model {noise_model!r} ({', '.join(NOISE_MODELS)})")
     started = time.perf_counter()
@@ -279,6 +285,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     options = _solver_options(sigma, estimate_line_delay=estimate, standardise_errors=standardise_errors,
                               use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
                               robust_loss=robust_loss, num_threads=num_threads, compute_covariance=False)
+    options.line_delay_score = bool(line_delay_score)
     # The noise model (docs/formulation.md §8): white noise per frame from the grid, plus what the
     # residuals show after each round (a fixed pattern per corner, frame-to-frame correlation).
     # Without RsSolverOptions.observation_sigma (an older _core) the white part is one sigma for all.
@@ -414,7 +421,8 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         image_velocity_px_s=np.asarray(summary.image_velocity_px_s),
         standardised_sq=np.asarray(summary.standardised_sq), frame_poses=used_poses, used_observations=used,
         observation_sigma_px=obs_sigma, noise=noise_summary, solver_line_delay_std_s=solver_std,
-        camera=camera if refine_intrinsics else None, intrinsics=intrinsics)
+        camera=camera if refine_intrinsics else None, intrinsics=intrinsics,
+        line_delay_score=np.asarray(summary.line_delay_score) if estimate else np.zeros((0, 2)))
 
 
 def _set_intrinsics_prior(options: _core.RsSolverOptions, camera: CameraModel,

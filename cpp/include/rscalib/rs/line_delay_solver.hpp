@@ -52,6 +52,9 @@ struct RsSolverOptions {
   // Ceres' covariance (sparse QR). The Schur path falls back to Ceres' when the trajectory block
   // is singular or a robust loss is used; with refine_intrinsics Ceres' covariance is always used.
   bool schur_variance = true;
+  // With schur_variance: also each observation's score of d (RsSolveSummary::line_delay_score),
+  // a second pass over the Jacobian; for experiments on correlated errors.
+  bool line_delay_score = false;
   bool verbose = false;
   // Joint refinement of the intrinsics (docs/formulation.md §14). false: the camera is known
   // (the path of every other option, unchanged). true: the camera's parameters (its layout,
@@ -88,6 +91,10 @@ struct RsSolveSummary {
   Eigen::MatrixX2d image_velocity_px_s;  // (M, 2) d(uv)/dt at the final estimate, NaN if not used
   Eigen::VectorXd standardised_sq;
   Eigen::VectorXd observation_time_s;
+  // (M, 2) each observation's linearised contribution to d_hat (u, v; whitened), from the final
+  // Schur-complement variance: sums over frames or time windows give a cluster-robust variance
+  // of d (docs/formulation.md §8). Empty when that variance was not computed.
+  Eigen::MatrixX2d line_delay_score;
   // refine_intrinsics only (empty otherwise): the refined parameters (n, the model's layout),
   // the covariance of [d, intrinsics] ((1 + n) x (1 + n), s/row and the layout's units; zero
   // rows for fixed parameters; empty when not computed) and the prior's cost.
