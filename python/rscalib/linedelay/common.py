@@ -90,11 +90,15 @@ def initial_values(observations: Observations, camera: CameraModel, rows: Option
     return rows, fps, nominal_delay_s, float(nominal_delay_s if line_delay_s is None else line_delay_s)
 
 
-def seed_poses(observations: Observations, camera: CameraModel, warnings: list, min_frames: int
-               ) -> tuple[Observations, FramePoses]:
+def seed_poses(observations: Observations, camera: CameraModel, warnings: list, min_frames: int,
+               poses: Optional[FramePoses] = None) -> tuple[Observations, FramePoses]:
     """GS PnP per frame, the initial guess of both trajectory models: the observations of the
-    frames with a pose, and those poses. Frames without a pose are left out with a warning."""
-    poses = per_frame_pnp(observations, camera)
+    frames with a pose, and those poses. Frames without a pose are left out with a warning.
+    poses: per_frame_pnp(observations, camera) when already computed."""
+    if poses is None:
+        poses = per_frame_pnp(observations, camera)
+    elif len(poses.ok) != observations.num_frames:
+        raise ValueError("poses: one per frame of the observations")
     frames_total = observations.num_frames
     used = observations.subset_frames(poses.ok)
     used_poses = FramePoses(poses.ok[poses.ok], poses.rotation_vector[poses.ok],

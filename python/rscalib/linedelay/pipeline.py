@@ -41,7 +41,7 @@ from .common import (
 )
 from .guidance import capture_guidance
 from .linear import LinearInterpResult, calibrate_line_delay_linear
-from .pnp import PnpTrajectory, compare_with_pnp, pnp_trajectory
+from .pnp import PnpTrajectory, compare_with_pnp, per_frame_pnp, pnp_trajectory
 from .readout import READOUTS, rotation_hint, time_window, to_top_down
 from .spline import LineDelayResult, RoundRecord, calibrate_line_delay, localize
 
@@ -197,15 +197,26 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
         if refine_intrinsics:  # absent otherwise: the default path's calls are unchanged
             options |= {"refine_intrinsics": True, "intrinsics_prior": intrinsics_prior}
         # The halves do not need the whole video's answer: they are solved in other threads meanwhile
-        # (the solver releases the GIL), each half seeding its own poses; after it when the memory
+        # (the solver releases the GIL), from the same per-frame poses; after it when the memory
         # would not hold the three solves at once (together about two whole ones).
+        # One PnP pass seeds all three (each frame's pose is its own: the halves' are the same). Bad
+        # input is left to calibrate_line_delay, whose checks come first and say what is wrong.
+        poses = None
+        if self_check and observations.num_frames >= 4 and _fits_in_memory(observations.num_observations):
+            poses = per_frame_pnp(observations, solve_camera)
+
+        def solve_half(half):
+            shared = None if poses is None else poses.of_frames(observations.frame_times_s, half.frame_times_s)
+            return calibrate_line_delay(half, solve_camera, rows, **options, frame_poses=shared)
+
         def solve_halves():
-            return selfcheck.halves(observations, lambda half: calibrate_line_delay(half, solve_camera, rows, **options))
+            return selfcheck.halves(observations, solve_half)
 
         alongside = self_check and _fits_in_memory(2 * observations.num_observations)
         with ThreadPoolExecutor(max_workers=1, thread_name_prefix="rscalib-selfcheck") as pool:
             halves = pool.submit(solve_halves) if alongside else None
-            result = calibrate_line_delay(observations, solve_camera, rows, progress=on_round, **options)
+            result = calibrate_line_delay(observations, solve_camera, rows, progress=on_round, frame_poses=poses,
+                                          **options)
             check = halves.result() if alongside else solve_halves() if self_check else None
         if self_check:
             result.self_check = check

@@ -2,6 +2,7 @@
 baseline it is compared against (paper §4.1 and Fig. 5)."""
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -27,11 +28,21 @@ class FramePoses:
     translation: np.ndarray
     rms_px: np.ndarray
 
+    def of_frames(self, frame_times_s: np.ndarray, subset_times_s: np.ndarray) -> FramePoses:
+        """The poses of the frames at subset_times_s, these poses being of the frames at
+        frame_times_s (e.g. a half of the video: the same per-frame PnP, not computed again)."""
+        index = np.searchsorted(frame_times_s, subset_times_s)
+        if np.any(index >= len(frame_times_s)) or not np.array_equal(frame_times_s[index], subset_times_s):
+            raise ValueError("the subset's frames are not among these poses' frames")
+        return FramePoses(self.ok[index], self.rotation_vector[index], self.translation[index], self.rms_px[index])
 
-def per_frame_pnp(observations: Observations, camera: CameraModel, min_points: int = 6) -> FramePoses:
+
+def per_frame_pnp(observations: Observations, camera: CameraModel, min_points: int = 6,
+                  threads: int = 2) -> FramePoses:
     """Planar PnP (OpenCV IPPE, then Levenberg-Marquardt) on undistorted, normalised points.
 
-    Normalising through the camera's own unprojection makes this work for every model.
+    Normalising through the camera's own unprojection makes this work for every model. Frames are
+    independent: `threads` share them (OpenCV releases the GIL); the result does not depend on it.
     """
     count = observations.num_frames
     ok = np.zeros(count, dtype=bool)
@@ -42,26 +53,47 @@ def per_frame_pnp(observations: Observations, camera: CameraModel, min_points: i
     points_w = observations.points_w()
     identity = np.eye(3)
     planar = np.allclose(observations.target_points[:, 2], 0.0)
-    for frame, rows in enumerate(observations.frame_slices()):
-        rows = rows[np.isfinite(rays[rows, 0])]
-        if len(rows) < min_points:
-            continue
-        obj = points_w[rows].reshape(-1, 1, 3)
-        img = rays[rows, :2].reshape(-1, 1, 2)
-        flag = cv2.SOLVEPNP_IPPE if planar else cv2.SOLVEPNP_ITERATIVE
-        found, rvec, tvec = cv2.solvePnP(obj, img, identity, None, flags=flag)
-        if not found:
-            continue
-        rvec, tvec = cv2.solvePnPRefineLM(obj, img, identity, None, rvec, tvec)
-        rotation = cv2.Rodrigues(rvec)[0]
-        points_c = points_w[rows] @ rotation.T + tvec.ravel()
-        if np.any(points_c[:, 2] <= 0):
-            continue
-        uv = camera.project(points_c)
-        ok[frame] = True
-        rvecs[frame] = rvec.ravel()
-        tvecs[frame] = tvec.ravel()
-        rms[frame] = float(np.sqrt(np.nanmean((uv - observations.uv[rows]) ** 2)))
+    flag = cv2.SOLVEPNP_IPPE if planar else cv2.SOLVEPNP_ITERATIVE
+    slices = [rows[np.isfinite(rays[rows, 0])] for rows in observations.frame_slices()]
+
+    def solve(frames) -> None:
+        for frame in frames:
+            rows = slices[frame]
+            if len(rows) < min_points:
+                continue
+            obj = points_w[rows].reshape(-1, 1, 3)
+            img = rays[rows, :2].reshape(-1, 1, 2)
+            found, rvec, tvec = cv2.solvePnP(obj, img, identity, None, flags=flag)
+            if not found:
+                continue
+            rvec, tvec = cv2.solvePnPRefineLM(obj, img, identity, None, rvec, tvec)
+            rotation = cv2.Rodrigues(rvec)[0]
+            if np.any(points_w[rows] @ rotation[2] + tvec[2, 0] <= 0):  # a point behind the camera
+                continue
+            ok[frame] = True
+            rvecs[frame] = rvec.ravel()
+            tvecs[frame] = tvec.ravel()
+
+    chunks = np.array_split(np.arange(count), max(1, min(int(threads), count)))
+    if len(chunks) > 1:
+        with ThreadPoolExecutor(max_workers=len(chunks), thread_name_prefix="rscalib-pnp") as pool:
+            list(pool.map(solve, chunks))
+    else:
+        solve(chunks[0] if chunks else [])
+    # reprojection RMS of every posed frame, in one projection call
+    posed = np.flatnonzero(ok)
+    if len(posed):
+        rows = np.concatenate([slices[f] for f in posed])
+        owner = np.repeat(posed, [len(slices[f]) for f in posed])
+        rotations = np.array([cv2.Rodrigues(rvecs[f])[0] for f in posed])
+        at = np.searchsorted(posed, owner)
+        points_c = np.einsum("nij,nj->ni", rotations[at], points_w[rows]) + tvecs[owner]
+        squared = (camera.project(points_c) - observations.uv[rows]) ** 2
+        finite = np.isfinite(squared)
+        sums = np.bincount(owner, weights=np.where(finite, squared, 0.0).sum(axis=1), minlength=count)
+        counts = np.bincount(owner, weights=finite.sum(axis=1), minlength=count)
+        with np.errstate(invalid="ignore", divide="ignore"):  # a frame with no finite projection: NaN
+            rms[posed] = np.sqrt(sums[posed] / counts[posed])
     return FramePoses(ok, rvecs, tvecs, rms)
 
 

@@ -208,6 +208,7 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                          refine_intrinsics: bool = False,
                          intrinsics_prior: Optional[IntrinsicsPrior] = None,
                          line_delay_score: bool = False,
+                         frame_poses: Optional[FramePoses] = None,
                          progress: Optional[Callable[[RoundRecord], None]] = None) -> LineDelayResult:
     """Estimate the line delay d (s/row) and the continuous-time trajectory (Oth et al. 2013 §3-4).
 
@@ -226,6 +227,8 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
     `camera` as the start, with the prior `intrinsics_prior` (common.IntrinsicsPrior; default:
     common.default_intrinsics_prior, sigma_f 2 %, sigma_c 10 px); the result's `camera` and
     `intrinsics` (with the covariance of [d, intrinsics]) hold the outcome (docs/formulation.md §14).
+    frame_poses: pnp.per_frame_pnp(observations, camera) when already computed (the self-check's
+    halves take theirs from the whole video's: FramePoses.of_frames).
     line_delay_score: also return each observation's linearised contribution to d
     (`result.line_delay_score`, for experiments on correlated errors: docs/experiments.md).
     progress: called after each round.
@@ -238,7 +241,7 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                 use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
                 robust_loss=robust_loss, num_threads=num_threads, noise_model=noise_model,
                 refine_intrinsics=refine_intrinsics, intrinsics_prior=intrinsics_prior,
-                line_delay_score=line_delay_score, progress=progress)
+                line_delay_score=line_delay_score, frame_poses=frame_poses, progress=progress)
 
 
 def localize(observations: Observations, camera: CameraModel, rows: Optional[int] = None,
@@ -254,7 +257,8 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
          initial_segments_per_s=None, num_segments=None, adaptive_knots=True, max_rounds=8,
          min_segment_s=None, split_margin_sigmas=2.0, standardise_errors=True, use_motion_prior=True,
          motion_prior_q=DEFAULT_MOTION_PRIOR_Q, robust_loss="none", num_threads=2, noise_model="frame",
-         refine_intrinsics=False, intrinsics_prior=None, line_delay_score=False, progress=None) -> LineDelayResult:
+         refine_intrinsics=False, intrinsics_prior=None, line_delay_score=False, frame_poses=None,
+         progress=None) -> LineDelayResult:
     if noise_model not in NOISE_MODELS:
         raise InputError(f"unknown noise model {noise_model!r} ({', '.join(NOISE_MODELS)})")
     started = time.perf_counter()
@@ -269,7 +273,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
 
     frames_total = observations.num_frames
     check_solve_memory(len(observations.uv))
-    used, used_poses = seed_poses(observations, camera, warnings, min_frames=4)
+    used, used_poses = seed_poses(observations, camera, warnings, min_frames=4, poses=frame_poses)
     sigma, sigma_source = choose_pixel_sigma(used, pixel_sigma)
 
     t_begin = float(used.frame_times_s[0])

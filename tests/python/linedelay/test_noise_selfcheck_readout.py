@@ -188,3 +188,25 @@ def test_frame_noise_model_keeps_the_line_delay_on_simulated_observations():
     assert abs(r.line_delay_s - 30e-6) <= 3 * r.line_delay_std_s
     assert r.noise["sigma_d_inflation"] < 1.3 and r.noise["fixed_pattern_px"] < 0.1
     assert 0.7 < r.normalised_cost < 1.3
+
+
+def test_halves_take_their_poses_from_the_whole_videos_pnp():
+    """The self-check's halves reuse the whole video's per-frame PnP: the same poses as PnP run on
+    the half itself, whatever the number of threads."""
+    from rscalib.linedelay.pnp import per_frame_pnp
+    sim = simulate_default(line_delay_s=30e-6, duration_s=2.0, seed=4)
+    c = sim.camera
+    cam = CameraModel(c.model, c.params, c.width, c.height)
+    obs = sim.observations
+    whole = per_frame_pnp(obs, cam, threads=2)
+    single = per_frame_pnp(obs, cam, threads=1)
+    assert np.array_equal(whole.rotation_vector, single.rotation_vector, equal_nan=True)
+    times = obs.frame_times_s
+    half = obs.subset_frames(times >= 0.5 * (times[0] + times[-1]))
+    direct = per_frame_pnp(half, cam)
+    shared = whole.of_frames(times, half.frame_times_s)
+    assert np.array_equal(shared.ok, direct.ok) and shared.ok.sum() == half.num_frames
+    assert np.array_equal(shared.translation, direct.translation)
+    np.testing.assert_allclose(shared.rms_px, direct.rms_px, rtol=1e-12)
+    with pytest.raises(ValueError):
+        whole.of_frames(times, half.frame_times_s + 1e-3)
