@@ -106,6 +106,12 @@ class Detector:
         elif kind == "charuco":
             self._charuco = cv2.aruco.CharucoDetector(target.charuco_board())
         self._reindexings = grid_reindexings(target.grid_shape) if kind in ("checkerboard", "circlegrid") else []
+        # Re-indexings that are symmetries of the layout (xy[perm] an affine image of xy: flips of a
+        # regular grid, not of an asymmetric circle grid) fit the image exactly as well as the first
+        # (identity) one: the homography's image error does not depend on an affine change of the
+        # target's coordinates, so _canonical fits those once.
+        xy = target.points_m[:, :2]
+        self._layout_symmetry = [_is_affine_image(xy, xy[perm]) for perm in self._reindexings]
 
     def detect(self, image: np.ndarray) -> FrameDetection:
         gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
@@ -269,13 +275,19 @@ class Detector:
         hull = cv2.convexHull(uv.astype(np.float32))
         step_px = np.sqrt(max(cv2.contourArea(hull), 1.0) / len(uv))
         fits = []
-        for perm in self._reindexings:
+        identity_rms = None
+        for perm, symmetry in zip(self._reindexings, self._layout_symmetry):
             candidate = uv[perm]
+            if symmetry and identity_rms is not None:
+                fits.append((identity_rms, candidate))
+                continue
             h, _ = cv2.findHomography(xy, candidate, 0)
             if h is None:
                 continue
             predicted = cv2.perspectiveTransform(xy.reshape(-1, 1, 2), h).reshape(-1, 2)
             fits.append((float(np.sqrt(np.mean(np.sum((predicted - candidate) ** 2, axis=1)))), candidate))
+            if symmetry and np.array_equal(perm, self._reindexings[0]):
+                identity_rms = fits[-1][0]
         if not fits:
             raise _Rejected("outlier_geometry")
         best_rms = min(f[0] for f in fits)
@@ -449,6 +461,14 @@ def _outer_ring_alternates(gray: np.ndarray, uv: np.ndarray, rows: int, cols: in
         if tested >= 3 and wrong > max_wrong_fraction * tested:
             return False
     return True
+
+
+def _is_affine_image(xy: np.ndarray, image: np.ndarray) -> bool:
+    """Whether image = A xy + b exactly (to 1e-9 of the layout's size) for some affine map."""
+    design = np.column_stack([xy, np.ones(len(xy))])
+    coeffs, *_ = np.linalg.lstsq(design, image, rcond=None)
+    size = max(float(np.ptp(xy)), 1e-12)
+    return bool(np.abs(design @ coeffs - image).max() <= 1e-9 * size)
 
 
 def grid_reindexings(grid_shape: tuple[int, int]) -> list[np.ndarray]:

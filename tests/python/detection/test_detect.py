@@ -338,3 +338,19 @@ def test_detect_video_memory_does_not_grow_with_length(tmp_path):
     tracemalloc.stop()
     assert result.frames_detected == 120
     assert peak < 8 * 640 * 480, f"peak {peak / 1e6:.1f} MB"
+
+
+@pytest.mark.parametrize("name", ["checkerboard", "circlegrid", "acircles"])
+def test_layout_symmetries_skip_refits_without_changing_the_ids(name):
+    """_canonical fits one homography for the re-indexings that are symmetries of the layout (all of a
+    regular grid's, not all of an asymmetric circle grid's); forcing every fit gives the same detection."""
+    target = TARGETS[name]
+    fast = Detector(target)
+    assert fast._layout_symmetry[0] and all(fast._layout_symmetry) == (name != "acircles")
+    slow = Detector(target)
+    slow._layout_symmetry = [False] * len(slow._layout_symmetry)
+    for roll_deg in (0.0, 75.0, 180.0, 290.0):
+        image, _ = render(target, *pose(target, roll_deg))
+        a, b = fast.detect(image), slow.detect(image)
+        assert a.accepted and b.accepted
+        assert np.array_equal(a.point_id, b.point_id) and np.array_equal(a.uv, b.uv)
