@@ -12,7 +12,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 CSV_COLUMNS = ("t_s", "world_to_camera_p_x_m", "world_to_camera_p_y_m", "world_to_camera_p_z_m",
                "world_to_camera_phi_x_rad", "world_to_camera_phi_y_rad", "world_to_camera_phi_z_rad")
@@ -34,10 +33,25 @@ def write_trajectory_csv(path, times, states) -> Path:
 
 
 def camera_to_world(states) -> tuple[np.ndarray, np.ndarray]:
-    """(camera centres in the world (n, 3), camera-to-world quaternions (n, 4) x y z w) of T_cw states."""
+    """(camera centres in the world (n, 3), camera-to-world quaternions (n, 4) x y z w) of T_cw states.
+
+    R_wc = exp(-phi): quaternion (-sin(θ/2) phi/θ, cos(θ/2)), θ = |phi| (scipy's Rotation gives the same,
+    tests/python/io; written out because importing scipy.spatial cost 0.4 s of every linedelay run)."""
     states = np.asarray(states, dtype=np.float64).reshape(-1, 6)
-    rotation_wc = Rotation.from_rotvec(states[:, 3:]).inv()
-    return -rotation_wc.apply(states[:, :3]), rotation_wc.as_quat()
+    phi = states[:, 3:]
+    theta = np.linalg.norm(phi, axis=1, keepdims=True)
+    small = theta < 1e-8
+    safe = np.where(small, 1.0, theta)
+    # sin(θ/2)/θ -> 1/2 - θ²/48 near 0
+    half_sinc = np.where(small, 0.5 - theta ** 2 / 48.0, np.sin(0.5 * safe) / safe)
+    quaternion = np.concatenate([-half_sinc * phi, np.cos(0.5 * theta)], axis=1)
+    # centre = -R_wc p, Rodrigues with axis k = -phi/θ
+    p = states[:, :3]
+    axis = np.where(small, 0.0, -phi / safe)
+    cos, sin = np.cos(theta), np.sin(theta)
+    rotated = (p * cos + np.cross(axis, p) * sin
+               + axis * np.sum(axis * p, axis=1, keepdims=True) * (1.0 - cos))
+    return -rotated, quaternion
 
 
 def write_tum_trajectory(path, times, states) -> Path:

@@ -23,6 +23,8 @@ def test_tum_holds_the_camera_to_world_pose_of_the_world_to_camera_states(tmp_pa
     rng = np.random.default_rng(1)
     states = np.c_[rng.normal(size=(20, 3)), rng.normal(size=(20, 3)) * 1.5]
     states[4] = np.nan                      # no pose at that time: left out
+    states[5, 3:], states[6, 3:] = 0.0, 1e-9  # no rotation, and the small-angle branch
+    assert np.nanmax(np.linalg.norm(states[:, 3:], axis=1)) > np.pi  # and rotation vectors past pi
     times = np.linspace(0, 1, 20)
     write_tum_trajectory(tmp_path / "t.txt", times, states)
     tum = read_tum(tmp_path / "t.txt")
