@@ -73,6 +73,8 @@ def compare(label: dict, truth: dict, filter_mean: np.ndarray, tracks, size: tup
         out["f_error_pct"] = 100 * (ba.camera[0] / truth["f"] - 1)
         out["inside"] = {n: bool(ba.bounds_99[i, 0] <= truth[n] <= ba.bounds_99[i, 1])
                          for i, n in enumerate(NAMES) if n in truth}
+        out["inside_tracks"] = {n: bool(ba.bounds_99_tracks[i, 0] <= truth[n] <= ba.bounds_99_tracks[i, 1])
+                                for i, n in enumerate(NAMES) if n in truth}
         row[name] = out
     return row
 
@@ -84,6 +86,8 @@ def print_row(row: dict) -> None:
           f"BA f {ba.get('f', float('nan')):.1f} ({ba.get('f_error_pct', float('nan')):+.2f} %) "
           f"[{ba.get('f_bounds_99', [np.nan] * 2)[0]:.1f}, {ba.get('f_bounds_99', [np.nan] * 2)[1]:.1f}] "
           f"inside {sum(ba.get('inside', {}).values())}/{len(ba.get('inside', {}))} "
+          f"(by track [{ba.get('f_bounds_99_tracks', [np.nan] * 2)[0]:.1f}, {ba.get('f_bounds_99_tracks', [np.nan] * 2)[1]:.1f}] "
+          f"{sum(ba.get('inside_tracks', {}).values())}/{len(ba.get('inside_tracks', {}))}) "
           f"sigma {ba.get('sigma_px', np.nan):.2f} px {ba.get('elapsed_s', np.nan):.1f} s | "
           f"generic f {gen.get('f', float('nan')):.1f} ({gen.get('f_error_pct', float('nan')):+.2f} %)"
           + (f" ERROR {ba['error']}" if "error" in ba else ""), flush=True)
@@ -104,14 +108,96 @@ def part_a(args) -> list[dict]:
     return rows
 
 
-def image_run(label: dict, source_path: Path, truth: dict, pixel_mm: float, step: int) -> dict:
+def image_run(label: dict, source_path: Path, truth: dict, pixel_mm: float, step: int, audited: bool = False) -> dict:
     gray = read_gray_frames(source_path)
     front_end = ImageFrontEnd(FrontEndOptions(), gray.image_size)
     mean, tracks, filter_s = filter_and_tracks(gray.frames, front_end, gray.image_size, pixel_mm)
     row = compare(dict(label, size=f"{gray.image_size[0]}x{gray.image_size[1]}"), truth, mean, tracks,
                   gray.image_size, pixel_mm, step, filter_s)
     print_row(row)
+    if audited:
+        row["audit"] = audit(source_path, tracks, mean, pixel_mm, step)
     return row
+
+
+def true_pixels(seq: Path, tracks) -> np.ndarray:
+    """The noise-free pixels of the recorded observations of a rendered sequence: each feature's
+    3-D point is where the true ray of its first pixel (the corner the front end started it at) meets
+    the room's box; every observation is that point projected at its row's mid-exposure time
+    (rolling shutter: row v at t_s + v d + exposure / 2, v from the measured pixel)."""
+    from rscalib.selfcalib.bundle import project_civera
+    from rscalib.sim.scene_features import CiveraCamera
+    from rscalib.sim.scene_realism import ROOM_SIZE_M, StyledRoomMotion
+
+    truth = json.loads((seq / "truth.json").read_text())
+    params, pixel_mm = np.array(truth["camera"]["params"]), float(truth["camera"]["pixel_size_mm"][0])
+    motion = StyledRoomMotion(truth["style"], truth["seed"], truth["num_frames_requested"] / truth["fps"])
+    t_frame = np.array([f["t_s"] for f in truth["frames"]])
+    t_obs = t_frame[tracks.frame] + tracks.uv[:, 1] * truth["line_delay_s"] + 0.5 * truth["exposure_s"]
+    R, p = motion.pose_cw(t_obs)
+    camera = CiveraCamera(*params, width=truth["camera"]["width"], height=truth["camera"]["height"],
+                          pixel_size_mm=pixel_mm)
+    order = np.lexsort((tracks.frame, tracks.feature_id))
+    first = order[np.r_[True, np.diff(tracks.feature_id[order]) != 0]]
+    ray_c = np.c_[(camera.undistort(tracks.uv[first]) - params[1:3]) / params[0], np.ones(len(first))]
+    ray_w = np.einsum("nji,nj->ni", R[first], ray_c)                  # R_cwᵀ ray
+    centre = -np.einsum("nji,nj->ni", R[first], p[first])
+    lx, ly, lz = ROOM_SIZE_M
+    lo, hi = np.array([-lx / 2, -ly / 2, 0.0]), np.array([lx / 2, ly / 2, lz])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        exit_t = np.where(ray_w > 0, (hi - centre) / ray_w, (lo - centre) / ray_w)
+    X = centre + np.nanmin(np.where(exit_t > 0, exit_t, np.nan), axis=1)[:, None] * ray_w
+    point_of = dict(zip(tracks.feature_id[first].tolist(), range(len(first))))
+    Xo = X[[point_of[i] for i in tracks.feature_id.tolist()]]
+    return project_civera(params, np.einsum("nij,nj->ni", R, Xo) + p, pixel_mm)
+
+
+def audit(seq: Path, tracks, filter_mean: np.ndarray, pixel_mm: float, step: int) -> dict:
+    """How far the front end's pixels are from the true ones (by track age; the radial component,
+    outwards positive, from the true principal point), and the BA on the true pixels of the same
+    observations (noise-free, and with 0.2 px independent noise)."""
+    import dataclasses
+
+    truth = json.loads((seq / "truth.json").read_text())
+    params = np.array(truth["camera"]["params"])
+    uv_true = true_pixels(seq, tracks)
+    err = tracks.uv - uv_true
+    offset = uv_true - params[1:3]
+    radial = np.sum(err * offset, axis=1) / np.maximum(np.linalg.norm(offset, axis=1), 1e-9)
+    first = {}
+    for k, fid in zip(tracks.frame.tolist(), tracks.feature_id.tolist()):
+        first.setdefault(fid, k)
+    age = tracks.frame - np.array([first[i] for i in tracks.feature_id.tolist()])
+    out = {"rms_px": float(np.sqrt(np.mean(err ** 2))), "beyond_2px": float(np.mean(np.linalg.norm(err, axis=1) > 2)),
+           "by_age": {}}
+    good = np.linalg.norm(err, axis=1) <= 2
+    for lo, hi in ((1, 5), (5, 15), (15, 40), (40, 10 ** 6)):
+        sel = good & (age >= lo) & (age < hi)
+        if sel.any():
+            out["by_age"][f"{lo}-{hi}"] = {
+                "n": int(sel.sum()), "rms_px": float(np.sqrt(np.mean(err[sel] ** 2))),
+                "mean_radial_px": float(np.mean(radial[sel])),
+                # radial error per px of radius: a zoom of the tracks against the truth
+                "radial_per_radius": float(np.sum(radial[sel] * np.linalg.norm(offset[sel], axis=1))
+                                           / np.sum(np.linalg.norm(offset[sel], axis=1) ** 2))}
+    rng = np.random.default_rng(7)
+    truth_d = dict(zip(NAMES, params.tolist()))
+    for name, uv in (("ba_true_pixels", uv_true), ("ba_true_pixels_0.2px", uv_true + rng.normal(0, 0.2, uv_true.shape))):
+        try:
+            ba = bundle_adjust(dataclasses.replace(tracks, uv=uv), filter_mean, pixel_mm, keyframe_step=step)
+        except ValueError as err_ba:
+            out[name] = {"error": str(err_ba)}
+            continue
+        out[name] = {"f": float(ba.camera[0]), "f_error_pct": 100 * (ba.camera[0] / params[0] - 1),
+                     "f_bounds_99": ba.bounds_99[0].tolist(), "sigma_px": ba.sigma_px,
+                     "inside": {n: bool(ba.bounds_99[i, 0] <= truth_d[n] <= ba.bounds_99[i, 1])
+                                for i, n in enumerate(NAMES)}}
+    print(f"  audit: rms {out['rms_px']:.2f} px, >2 px {100 * out['beyond_2px']:.1f} %, by age "
+          + ", ".join(f"{k}: {v['rms_px']:.2f} px radial {v['mean_radial_px']:+.3f} ({v['radial_per_radius']:+.2e}/px)"
+                      for k, v in out["by_age"].items())
+          + f"; BA on true pixels f {out['ba_true_pixels'].get('f_error_pct', np.nan):+.2f} %, "
+          f"+0.2 px noise {out['ba_true_pixels_0.2px'].get('f_error_pct', np.nan):+.2f} %", flush=True)
+    return out
 
 
 def part_b(args) -> list[dict]:
@@ -126,7 +212,7 @@ def part_b(args) -> list[dict]:
                 camera = json.loads((seq / "truth.json").read_text())["camera"]
                 truth = dict(zip(NAMES, camera["params"]))
                 rows.append(image_run({"part": "b", "style": style, "seed": seed}, seq, truth,
-                                      float(camera["pixel_size_mm"][0]), args.step))
+                                      float(camera["pixel_size_mm"][0]), args.step, args.audit))
     return rows
 
 
@@ -149,11 +235,31 @@ def summarise(rows: list[dict]) -> dict:
             "ba_f_within_2pct": sum(abs(r["ba"]["f_error_pct"]) <= 2 for r in group),
             "ba_inside_99": inside,
             "ba_inside_all": sum(all(r["ba"]["inside"].values()) for r in group),
+            "ba_inside_99_tracks": {n: sum(r["ba"]["inside_tracks"].get(n, False) for r in group) for n in inside},
+            "ba_inside_all_tracks": sum(all(r["ba"]["inside_tracks"].values()) for r in group),
             "ba_generic_f_error_pct": [round(r["ba_generic"].get("f_error_pct", np.nan), 2) for r in group],
             "ba_median_s": float(np.median([r["ba"]["elapsed_s"] for r in group])),
             "filter_median_s": float(np.median([r["filter_s"] for r in group])),
         }
     return out
+
+
+def table(rows: list[dict]) -> str:
+    """Markdown: one line per part/style/size."""
+    lines = ["| part | style | size | runs | filter median abs f err % | BA median (max) abs f err % | BA f within 2 % "
+             "| BA truth in 99 % f/cx/cy/k1/k2 (model) | (by track) | generic start lands within 0.5 % of BA "
+             "| BA median s |", "|" + " --- |" * 11]
+    for key, g in summarise(rows).items():
+        part, style, size = key.split(" ", 1)[0], *key.split(" ", 1)[1].rsplit(" ", 1)
+        group = [r for r in rows if r["part"] == part and r.get("style") == style and r.get("size") == size
+                 and "f" in r.get("ba", {})]
+        same = sum(abs(r["ba_generic"].get("f", np.inf) / r["ba"]["f"] - 1) <= 0.005 for r in group)
+        inside = "/".join(str(v) for v in g["ba_inside_99"].values())
+        inside_t = "/".join(str(v) for v in g["ba_inside_99_tracks"].values())
+        lines.append(f"| {part} | {style} | {size} | {g['runs']} | {np.median(np.abs(g['filter_f_error_pct'])):.1f} "
+                     f"| {np.median(np.abs(g['ba_f_error_pct'])):.2f} ({np.max(np.abs(g['ba_f_error_pct'])):.2f}) "
+                     f"| {g['ba_f_within_2pct']} | {inside} | {inside_t} | {same} | {g['ba_median_s']:.1f} |")
+    return "\n".join(lines)
 
 
 def main() -> None:
@@ -166,7 +272,13 @@ def main() -> None:
     ap.add_argument("--step", type=int, default=3, help="keyframe every STEP frames")
     ap.add_argument("--cache", default="/tmp/rscalib_h11_selfcalib_realistic")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "exp_selfcalib_bundle.json"))
+    ap.add_argument("--audit", action="store_true",
+                    help="part b: also compare the tracks with the true pixels and run the BA on those")
+    ap.add_argument("--table", nargs="*", metavar="JSON", help="only print the table of these result files")
     args = ap.parse_args()
+    if args.table is not None:
+        print(table([r for path in args.table for r in json.loads(Path(path).read_text())["runs"]]))
+        return
     started = time.perf_counter()
     rows: list[dict] = []
     for part, run in (("a", part_a), ("b", part_b), ("c", part_c)):

@@ -200,6 +200,10 @@ class BundleProblem:
     def num_poses(self) -> int:
         return len(self.R0)
 
+    @property
+    def num_points(self) -> int:
+        return (len(self.x_full) - self.point_offset()) // _POINT_SIZE
+
     def pose_offset(self) -> int:
         return _CAMERA_SIZE
 
@@ -271,12 +275,16 @@ def residuals_and_jacobian(problem: BundleProblem, x: np.ndarray, jacobian: bool
 
 @dataclass
 class BundleResult:
-    """The adjusted camera ``[f, cx, cy, k1, k2]``, its covariance (5, 5) and 99 % ``bounds_99`` (5, 2);
-    ``sigma_px``: the residual standard deviation (robustly weighted); sizes, cost, time."""
+    """The adjusted camera ``[f, cx, cy, k1, k2]``, its covariance (5, 5) and 99 % ``bounds_99`` (5, 2)
+    from the model (independent pixel errors), the same cluster-robust by feature track
+    (``covariance_tracks``, ``bounds_99_tracks``); ``sigma_px``: the residual standard deviation
+    (robustly weighted); sizes, cost, time."""
 
     camera: np.ndarray
     covariance: np.ndarray
     bounds_99: np.ndarray
+    covariance_tracks: np.ndarray
+    bounds_99_tracks: np.ndarray
     sigma_px: float
     keyframes: int
     points: int
@@ -294,7 +302,10 @@ class BundleResult:
         names = ("f", "cx", "cy", "k1", "k2")
         out = {n: float(v) for n, v in zip(names, self.camera)}
         out.update({f"{n}_bounds_99": [float(b[0]), float(b[1])] for n, b in zip(names, self.bounds_99)})
-        out.update(sigma=dict(zip(names, np.sqrt(np.diag(self.covariance)).tolist())), sigma_px=self.sigma_px,
+        out.update({f"{n}_bounds_99_tracks": [float(b[0]), float(b[1])] for n, b in zip(names, self.bounds_99_tracks)})
+        out.update(sigma=dict(zip(names, np.sqrt(np.diag(self.covariance)).tolist())),
+                   sigma_tracks=dict(zip(names, np.sqrt(np.diag(self.covariance_tracks)).tolist())),
+                   sigma_px=self.sigma_px,
                    keyframes=self.keyframes, points=self.points, observations=self.observations,
                    inlier_fraction=self.inlier_fraction, rms_px=self.rms_px, nfev=self.nfev, status=self.status,
                    message=self.message, elapsed_s=self.elapsed_s, start=self.start.tolist(), **self.extra)
@@ -302,10 +313,11 @@ class BundleResult:
 
 
 def build_problem(tracks: FeatureTracks, camera0: np.ndarray, pixel_size_mm: np.ndarray, keyframe_step: int,
-                   min_views: int) -> BundleProblem:
+                   min_views: int, max_track_frames: Optional[int] = None) -> BundleProblem:
     """The adjustment's problem: observations of features seen in >= ``min_views`` keyframes (every
     ``keyframe_step``-th recorded frame), started from ``camera0`` and the filter's poses and points,
-    with the gauge held (module docstring)."""
+    with the gauge held (module docstring); tracks cut into points of at most ``max_track_frames``
+    frames each (None: whole tracks)."""
     frames = np.array(sorted(tracks.R_cw))
     keyframes = frames[::keyframe_step]
     key_index = {int(k): i for i, k in enumerate(keyframes)}
@@ -322,14 +334,24 @@ def build_problem(tracks: FeatureTracks, camera0: np.ndarray, pixel_size_mm: np.
     X = np.array([points[int(i)] for i in fid]).reshape(-1, 3)
     depth = np.einsum("nij,nj->ni", R0[pose_of], X)[:, 2] + p0[pose_of, 2]
     ok = depth > 1e-3
+    fid, frame, pose_of, uv = fid[ok], frame[ok], pose_of[ok], uv[ok]
+    # a track longer than max_track_frames becomes several points: the front end's match drifts
+    # with the age of its patch (docs/sog.md §1), and a fresh point absorbs the offset so far
+    segment = np.zeros(len(fid), np.int64)
+    if max_track_frames is not None:
+        start = {}
+        for i, k in zip(fid.tolist(), frame.tolist()):
+            start[i] = min(k, start.get(i, k))
+        segment = (frame - np.array([start[i] for i in fid.tolist()], dtype=np.int64)) // int(max_track_frames)
+    pairs, point_of, counts = np.unique(np.c_[fid, segment], axis=0, return_inverse=True, return_counts=True)
+    point_of = point_of.reshape(-1)
+    keep = counts >= min_views
+    ok = keep[point_of]
     fid, pose_of, uv = fid[ok], pose_of[ok], uv[ok]
-    ids, counts = np.unique(fid, return_counts=True)
-    keep_ids = ids[counts >= min_views]
-    ok = np.isin(fid, keep_ids)
-    fid, pose_of, uv = fid[ok], pose_of[ok], uv[ok]
+    point_of = (np.cumsum(keep) - 1)[point_of[ok]]
+    keep_ids = pairs[keep, 0]
     if len(keep_ids) < 10:
         raise InputError(f"bundle adjustment: only {len(keep_ids)} features seen in >= {min_views} keyframes")
-    point_of = np.searchsorted(keep_ids, fid)
     X0 = np.array([points[int(i)] for i in keep_ids])
     x_full = np.concatenate([np.asarray(camera0, float), np.c_[np.zeros((len(keyframes), 3)), p0].ravel(), X0.ravel()])
     free = np.ones(len(x_full), bool)
@@ -343,29 +365,66 @@ def build_problem(tracks: FeatureTracks, camera0: np.ndarray, pixel_size_mm: np.
                     x_full=x_full)
 
 
-def _camera_covariance(problem: BundleProblem, x: np.ndarray, loss_scale_px: float) -> tuple[np.ndarray, float, float]:
-    """(5, 5) covariance of the camera, the weighted residual sigma (px) and the fraction of
-    residuals inside the loss scale. soft_l1 weights ρ'(z) = (1 + z)^-½, z = (r / scale)²."""
+def _camera_columns_of_inverse(problem: BundleProblem, H: scipy.sparse.csr_matrix) -> np.ndarray:
+    """H⁻¹ E_camera (n, 5) of the normal matrix H (n, n) through the Schur complement of the points
+    (block diagonal, one block per point): S = A − B C⁻¹ Bᵀ over the camera and poses, then
+    H⁻¹ E = [S⁻¹ E; −C⁻¹ Bᵀ S⁻¹ E]. Jacobi-scaled first; pseudo-inverses where singular."""
+    scale = 1.0 / np.sqrt(np.maximum(H.diagonal(), 1e-300))
+    Hs = (scipy.sparse.diags(scale) @ H @ scipy.sparse.diags(scale)).tocsr()
+    na = problem.point_offset() - _POSE_SIZE                      # free camera and pose columns
+    block = np.repeat(np.arange(problem.num_points), _POINT_SIZE)[problem.free[problem.point_offset():]]
+    size = np.bincount(block, minlength=problem.num_points)
+    first = np.r_[0, np.cumsum(size)[:-1]]
+    slot = np.arange(len(block)) - first[block]
+    C = Hs[na:, na:].tocoo()
+    blocks = np.zeros((problem.num_points, _POINT_SIZE, _POINT_SIZE))
+    blocks[block[C.row], slot[C.row], slot[C.col]] = C.data
+    for b in np.flatnonzero(size < _POINT_SIZE):                 # the anchor: its z is held
+        blocks[b, size[b]:, size[b]:] = np.eye(_POINT_SIZE - size[b])
+    blocks_inv = np.linalg.pinv(blocks, hermitian=True)
+    other = np.arange(_POINT_SIZE)[None, :]
+    valid = other < size[block][:, None]
+    rows = np.broadcast_to(np.arange(len(block))[:, None], valid.shape)[valid]
+    cols = (first[block][:, None] + other)[valid]
+    data = blocks_inv[block[:, None], slot[:, None], other][valid]
+    C_inv = scipy.sparse.csr_matrix((data, (rows, cols)), shape=(len(block), len(block)))
+    B = Hs[:na, na:]
+    S = Hs[:na, :na].toarray() - (B @ C_inv @ B.T).toarray()
+    rhs = np.zeros((na, _CAMERA_SIZE))
+    rhs[:_CAMERA_SIZE] = np.diag(scale[:_CAMERA_SIZE])            # the camera is always free and first
+    try:
+        z_a = scipy.linalg.solve(S, rhs, assume_a="pos")
+    except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
+        z_a = np.linalg.lstsq(S, rhs, rcond=1e-12)[0]
+    z_b = -(C_inv @ (B.T @ z_a))
+    return scale[:, None] * np.vstack([z_a, z_b])
+
+
+def _camera_covariance(problem: BundleProblem, x: np.ndarray, loss_scale_px: float
+                       ) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """The camera's (5, 5) covariance two ways: from the model, σ² (Jᵀ W J)⁻¹ (independent pixel
+    errors), and cluster-robust by feature track, H⁻¹ (Σ_j g_j g_jᵀ) H⁻¹ · G / (G − 1) with g_j = J_jᵀ W r_j
+    summed over track j (errors correlated along a track, e.g. a patch drifting); then the weighted
+    residual sigma (px) and the fraction of residuals inside the loss scale. W: the soft_l1
+    weights ρ'(z) = (1 + z)^-½, z = (r / scale)²."""
     res, jac = residuals_and_jacobian(problem, x)
     weight = 1.0 / np.sqrt(1.0 + (res / loss_scale_px) ** 2)
     dof = max(len(res) - jac.shape[1], 1)
     sigma2 = float(np.sum(weight * res ** 2) / dof)
-    H = (jac.T @ scipy.sparse.diags(weight) @ jac).toarray()
-    scale = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))
-    Hs = H * scale[:, None] * scale[None, :]
-    rhs = np.zeros((len(H), _CAMERA_SIZE))
-    rhs[:_CAMERA_SIZE] = np.eye(_CAMERA_SIZE)        # the camera is always free and first
-    try:
-        sol = scipy.linalg.solve(Hs, rhs, assume_a="pos")
-    except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
-        sol = np.linalg.lstsq(Hs, rhs, rcond=1e-12)[0]
-    cov = sigma2 * sol[:_CAMERA_SIZE] * scale[:_CAMERA_SIZE, None] * scale[None, :_CAMERA_SIZE]
-    return cov, float(np.sqrt(sigma2)), float(np.mean(np.abs(res) <= loss_scale_px))
+    z = _camera_columns_of_inverse(problem, (jac.T @ scipy.sparse.diags(weight) @ jac).tocsr())
+    cov = sigma2 * z[:_CAMERA_SIZE]
+    per_residual = (jac @ z) * (weight * res)[:, None]     # (2N, 5): each residual's share of Zᵀ g
+    tracks = np.repeat(problem.obs_point, 2)
+    per_track = np.zeros((problem.num_points, _CAMERA_SIZE))
+    np.add.at(per_track, tracks, per_residual)
+    count = len(per_track)
+    cov_tracks = per_track.T @ per_track * count / max(count - 1, 1)
+    return cov, cov_tracks, float(np.sqrt(sigma2)), float(np.mean(np.abs(res) <= loss_scale_px))
 
 
 def bundle_adjust(tracks: FeatureTracks, camera0: Sequence[float], pixel_size_mm: Union[float, Sequence[float]], *,
                   keyframe_step: int = 3, min_views: int = 3, loss_scale_px: float = 2.0,
-                  max_nfev: int = 300, ftol: float = 1e-6) -> BundleResult:
+                  max_nfev: int = 300, ftol: float = 1e-6, max_track_frames: Optional[int] = None) -> BundleResult:
     """Adjust the camera, keyframe poses (every ``keyframe_step``-th recorded frame) and points
     (features seen in >= ``min_views`` keyframes) from ``camera0`` and the filter's poses and
     points; soft_l1 loss at ``loss_scale_px``."""
@@ -373,7 +432,7 @@ def bundle_adjust(tracks: FeatureTracks, camera0: Sequence[float], pixel_size_mm
         raise InputError("bundle adjustment: no tracks")
     started = time.perf_counter()
     px = np.broadcast_to(np.asarray(pixel_size_mm, float).reshape(-1), (2,)).copy()
-    problem = build_problem(tracks, np.asarray(camera0, float), px, keyframe_step, min_views)
+    problem = build_problem(tracks, np.asarray(camera0, float), px, keyframe_step, min_views, max_track_frames)
     x0 = problem.x_full[problem.free]
     lower = np.full(len(x0), -np.inf)
     lower[0] = 1.0    # f > 0: from a poor start the mirrored camera (f < 0) is a solution too
@@ -386,9 +445,11 @@ def bundle_adjust(tracks: FeatureTracks, camera0: Sequence[float], pixel_size_mm
                         tr_options={"atol": 1e-12, "btol": 1e-12}, ftol=ftol, loss="soft_l1", f_scale=loss_scale_px,
                         bounds=(lower, np.inf), max_nfev=max_nfev)
     camera = problem.unpack(fit.x)[0]
-    cov, sigma_px, inliers = _camera_covariance(problem, fit.x, loss_scale_px)
+    cov, cov_tracks, sigma_px, inliers = _camera_covariance(problem, fit.x, loss_scale_px)
     half = _Z99 * np.sqrt(np.maximum(np.diag(cov), 0.0))
+    half_tracks = _Z99 * np.sqrt(np.maximum(np.diag(cov_tracks), 0.0))
     return BundleResult(camera=camera, covariance=cov, bounds_99=np.c_[camera - half, camera + half],
+                        covariance_tracks=cov_tracks, bounds_99_tracks=np.c_[camera - half_tracks, camera + half_tracks],
                         sigma_px=sigma_px, keyframes=problem.num_poses, points=int(problem.obs_point.max()) + 1,
                         observations=len(problem.uv), inlier_fraction=inliers,
                         rms_px=float(np.sqrt(np.mean(fit.fun ** 2))), nfev=int(fit.nfev), status=int(fit.status),
