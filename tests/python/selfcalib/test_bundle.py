@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import rscalib.selfcalib.bundle as bundle_module
 from rscalib.selfcalib.bundle import TrackRecorder, build_problem, bundle_adjust, project_civera, residuals_and_jacobian
 from rscalib.selfcalib.calibrate import default_options
 from rscalib.selfcalib.driver import run_bank
@@ -68,3 +69,14 @@ def test_jacobian_matches_central_differences(run):
                    residuals_and_jacobian(problem, x - e, False)[0]) / (2 * step)
         np.testing.assert_allclose(dense[:, c], numeric, rtol=0, atol=1e-6 * max(1.0, np.abs(numeric).max()),
                                    err_msg=f"column {c}")
+
+
+@pytest.mark.parametrize("max_track_frames", [None, 20])
+def test_schur_complement_matches_a_dense_inverse(run, max_track_frames):
+    filter_mean, tracks = run
+    problem = build_problem(tracks, filter_mean, np.array([PAPER_PIXEL_SIZE_MM] * 2), 3, 3, max_track_frames)
+    _, jac = residuals_and_jacobian(problem, problem.x_full[problem.free])
+    normal = (jac.T @ jac).tocsr()
+    dense = np.linalg.inv(normal.toarray())[:, :5]
+    columns = bundle_module._camera_columns_of_inverse(problem, normal)
+    np.testing.assert_allclose(columns[:5], dense[:5], rtol=1e-6, atol=1e-9 * np.abs(dense[:5]).max())
