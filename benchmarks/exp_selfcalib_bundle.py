@@ -25,6 +25,7 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -58,14 +59,14 @@ def filter_and_tracks(frames, source, size: tuple[int, int], pixel_mm: float) ->
 
 
 def compare(label: dict, truth: dict, filter_mean: np.ndarray, tracks, size: tuple[int, int], pixel_mm: float,
-            step: int, filter_s: float) -> dict:
+            step: int, filter_s: float, max_track_frames: Optional[int] = None) -> dict:
     """BA from the filter and from a generic camera; errors and coverage against ``truth``."""
     row = dict(label, truth=truth, filter=dict(zip(NAMES, filter_mean.tolist())), filter_s=round(filter_s, 2),
                filter_f_error_pct=100 * (filter_mean[0] / truth["f"] - 1), observations_recorded=len(tracks))
     generic = np.array([size[0], size[0] / 2, size[1] / 2, 0.0, 0.0])
     for name, start in (("ba", filter_mean), ("ba_generic", generic)):
         try:
-            ba = bundle_adjust(tracks, start, pixel_mm, keyframe_step=step)
+            ba = bundle_adjust(tracks, start, pixel_mm, keyframe_step=step, max_track_frames=max_track_frames)
         except (ValueError, np.linalg.LinAlgError) as err:   # InputError is a ValueError
             row[name] = {"error": str(err)}
             continue
@@ -103,17 +104,18 @@ def part_a(args) -> list[dict]:
             source = feature_level_source(style, seed, args.frames)
             mean, tracks, filter_s = filter_and_tracks(source.frames(), source, (320, 240), pixel_size_mm(320))
             rows.append(compare({"part": "a", "style": style, "size": "320x240", "seed": seed}, truth, mean, tracks,
-                                (320, 240), pixel_size_mm(320), args.step, filter_s))
+                                (320, 240), pixel_size_mm(320), args.step, filter_s, args.max_track_frames))
             print_row(rows[-1])
     return rows
 
 
-def image_run(label: dict, source_path: Path, truth: dict, pixel_mm: float, step: int, audited: bool = False) -> dict:
+def image_run(label: dict, source_path: Path, truth: dict, pixel_mm: float, step: int, audited: bool = False,
+              max_track_frames: Optional[int] = None) -> dict:
     gray = read_gray_frames(source_path)
     front_end = ImageFrontEnd(FrontEndOptions(), gray.image_size)
     mean, tracks, filter_s = filter_and_tracks(gray.frames, front_end, gray.image_size, pixel_mm)
     row = compare(dict(label, size=f"{gray.image_size[0]}x{gray.image_size[1]}"), truth, mean, tracks,
-                  gray.image_size, pixel_mm, step, filter_s)
+                  gray.image_size, pixel_mm, step, filter_s, max_track_frames)
     print_row(row)
     if audited:
         row["audit"] = audit(source_path, tracks, mean, pixel_mm, step)
@@ -212,13 +214,13 @@ def part_b(args) -> list[dict]:
                 camera = json.loads((seq / "truth.json").read_text())["camera"]
                 truth = dict(zip(NAMES, camera["params"]))
                 rows.append(image_run({"part": "b", "style": style, "seed": seed}, seq, truth,
-                                      float(camera["pixel_size_mm"][0]), args.step, args.audit))
+                                      float(camera["pixel_size_mm"][0]), args.step, args.audit, args.max_track_frames))
     return rows
 
 
 def part_c(args) -> list[dict]:
     return [image_run({"part": "c", "style": "desk video", "seed": None}, DESK, DESK_TRUTH, DESK_PIXEL_SIZE_MM,
-                      args.step)]
+                      args.step, max_track_frames=args.max_track_frames)]
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -272,6 +274,8 @@ def main() -> None:
     ap.add_argument("--step", type=int, default=3, help="keyframe every STEP frames")
     ap.add_argument("--cache", default="/tmp/rscalib_h11_selfcalib_realistic")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "exp_selfcalib_bundle.json"))
+    ap.add_argument("--max-track-frames", type=int, default=None,
+                    help="cut tracks into points of at most this many frames (bundle_adjust's max_track_frames)")
     ap.add_argument("--audit", action="store_true",
                     help="part b: also compare the tracks with the true pixels and run the BA on those")
     ap.add_argument("--table", nargs="*", metavar="JSON", help="only print the table of these result files")
