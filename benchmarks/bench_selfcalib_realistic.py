@@ -121,29 +121,37 @@ def summarise(rows: list[dict]) -> dict:
     return summary
 
 
+def feature_level_source(style: str, seed: int, frames: int):
+    """True correspondences of points on the room's planes seen along ``style``'s motion (0.5 px
+    noise, global shutter): the feature-level twin of a rendered sequence (also
+    benchmarks/exp_selfcalib_bundle.py)."""
+    import numpy as np
+
+    from rscalib.sim.scene_features import TrueCorrespondences, simulate_sequence
+    from rscalib.sim.scene_realism import ROOM_SIZE_M, StyledRoomMotion
+
+    rng = np.random.default_rng([0xFEA7, seed])
+    lx, ly, lz = ROOM_SIZE_M
+    points = rng.uniform(size=(4000, 3)) * [lx, ly, lz] - [lx / 2, ly / 2, 0.0]
+    face = rng.integers(6, size=len(points))  # snap each point onto one of the six planes
+    for k, (axis, value) in enumerate([(2, 0.0), (2, lz), (0, -lx / 2), (0, lx / 2), (1, -ly / 2), (1, ly / 2)]):
+        points[face == k, axis] = value
+    motion = StyledRoomMotion(style, seed, frames / 30.0)
+    return TrueCorrespondences(simulate_sequence(duration_s=frames / 30.0, seed=seed, points_w=points, motion=motion))
+
+
 def feature_level(seeds: range, frames: int) -> list[dict]:
     """The filter alone on the same motions and room: true correspondences of points on the room's
     planes (0.5 px noise, global shutter), the default bank options; no images (docs/sog.md §16)."""
-    import numpy as np
-
     from rscalib.selfcalib.calibrate import default_options
     from rscalib.selfcalib.driver import run_bank
     from rscalib.selfcalib.prior import make_bank
-    from rscalib.sim.scene_features import PAPER_CAMERA, TrueCorrespondences, simulate_sequence
-    from rscalib.sim.scene_realism import ROOM_SIZE_M, StyledRoomMotion
+    from rscalib.sim.scene_features import PAPER_CAMERA
 
     rows = []
     for style in STYLES:
         for seed in seeds:
-            rng = np.random.default_rng([0xFEA7, seed])
-            lx, ly, lz = ROOM_SIZE_M
-            points = rng.uniform(size=(4000, 3)) * [lx, ly, lz] - [lx / 2, ly / 2, 0.0]
-            face = rng.integers(6, size=len(points))  # snap each point onto one of the six planes
-            for k, (axis, value) in enumerate([(2, 0.0), (2, lz), (0, -lx / 2), (0, lx / 2), (1, -ly / 2), (1, ly / 2)]):
-                points[face == k, axis] = value
-            motion = StyledRoomMotion(style, seed, frames / 30.0)
-            source = TrueCorrespondences(simulate_sequence(duration_s=frames / 30.0, seed=seed, points_w=points,
-                                                           motion=motion))
+            source = feature_level_source(style, seed, frames)
             bank = make_bank(320, 240, pixel_size_mm(320), options=default_options())
             history = run_bank(bank, source.frames(), source)
             f, (lo, hi) = history.mean[-1, 0], history.bounds_99[-1, 0]

@@ -1,0 +1,457 @@
+"""Batch bundle adjustment over the tracks of a self-calibration run (issue 11, an experiment).
+
+The SOG bank (docs/sog.md) is the online engine; this refines its answer offline: one shared
+civera-radial camera ``[f, cx, cy, k1 (mm^-2), k2 (mm^-4)]`` (the filter's parameterisation,
+docs/conventions.md), one pose per keyframe and one 3-D point per feature, fitted to the pixels
+the filter used (its RANSAC/gate inliers) by SciPy's ``least_squares`` with a robust loss, a sparse
+analytic Jacobian and ``x_scale='jac'``. The intrinsics' covariance is (Jᵀ W J)⁻¹ times the
+residual variance (W: the robust loss's weights at the solution).
+
+- :class:`TrackRecorder` wraps any measurement source of :func:`rscalib.selfcalib.driver.run_bank`
+  and, through its ``on_frame`` hook, keeps per frame the used measurements, the bank's merged
+  camera pose and the latest map points (to start the adjustment).
+- :func:`bundle_adjust` runs the adjustment on the recorded :class:`FeatureTracks`.
+
+Gauge: the first keyframe's pose is held at the filter's (the filter's world is the first
+camera), and the scale by holding the world z of the point seen most often in that keyframe.
+Poses are ``x_c = R_i X + p_i`` with ``R_i = exp([θ_i]×) R0_i`` (θ_i the unknown, R0_i the start).
+Not wired into the CLI: docs/sog.md §16 says what it is measured against.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Optional, Sequence, Union
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from .. import _core
+from ..errors import InputError
+
+__all__ = ["BundleProblem", "BundleResult", "FeatureTracks", "TrackRecorder", "build_problem", "bundle_adjust", "project_civera",
+           "residuals_and_jacobian"]
+
+_Z99 = 2.5758293035489004
+_CAMERA_SIZE = 5
+_POSE_SIZE = 6
+_POINT_SIZE = 3
+
+
+# --------------------------------------------------------------------------------------------------
+# Tracks out of a run
+
+
+@dataclass
+class FeatureTracks:
+    """What the filter used: observations (``frame`` (N,), ``feature_id`` (N,), ``uv`` (N, 2)
+    distorted pixels), per processed frame its merged pose ``R_cw`` / ``p_cw`` (dicts frame -> (3, 3),
+    (3,)), and per feature the latest point of the leading filter in its world (``points``, id -> (3,))."""
+
+    frame: np.ndarray
+    feature_id: np.ndarray
+    uv: np.ndarray
+    R_cw: dict
+    p_cw: dict
+    points: dict
+
+    def __len__(self) -> int:
+        return len(self.frame)
+
+
+class TrackRecorder:
+    """A measurement source around ``source`` that records what the bank used. Pass it to
+    ``run_bank`` as the source and its :meth:`on_frame` as ``on_frame``; then :meth:`tracks`."""
+
+    def __init__(self, source: Any) -> None:
+        self.source = source
+        self._last: tuple[np.ndarray, np.ndarray] = (np.zeros(0, np.int64), np.zeros((0, 2)))
+        self._new: list[tuple[np.ndarray, np.ndarray]] = []
+        self._rows: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self._R_cw: dict = {}
+        self._p_cw: dict = {}
+        self._points: dict = {}
+
+    @property
+    def options(self) -> Any:
+        return self.source.options
+
+    def measure(self, frame: Any, ids: np.ndarray, uv_pred: np.ndarray, cov: np.ndarray):
+        uv, found = self.source.measure(frame, ids, uv_pred, cov)
+        self._last = (np.asarray(ids, np.int64).copy(), np.asarray(uv, float).copy())
+        return uv, found
+
+    def forget(self, feature_ids: np.ndarray) -> None:
+        self.source.forget(feature_ids)
+
+    def new_features(self, frame: Any, count: int, search: Any) -> np.ndarray:
+        return self.source.new_features(frame, count, search)
+
+    def track(self, frame: Any, feature_ids: np.ndarray, uv: np.ndarray) -> None:
+        self.source.track(frame, feature_ids, uv)
+        self._new.append((np.asarray(feature_ids, np.int64).copy(), np.asarray(uv, float).copy()))
+
+    def on_frame(self, k: int, bank: _core.SogBank, report: _core.SogUpdateReport) -> None:
+        ids, uv = self._last
+        used = np.asarray(report.used, bool)
+        self._rows.append((k, ids[used], uv[used]))
+        for new_ids, new_uv in self._new:     # a new feature's first pixel is a measurement too
+            self._rows.append((k, new_ids, new_uv))
+        self._new = []
+        self._last = (np.zeros(0, np.int64), np.zeros((0, 2)))
+        state = np.asarray(bank.camera_state, float)
+        R_wc = Rotation.from_quat(np.roll(state[3:7], -1)).as_matrix()   # stored w first
+        self._R_cw[k] = R_wc.T
+        self._p_cw[k] = -R_wc.T @ state[:3]
+        for fid, point in zip(np.asarray(bank.feature_ids), np.asarray(bank.feature_points())):
+            self._points[int(fid)] = point.copy()
+
+    def tracks(self) -> FeatureTracks:
+        frames = [np.full(len(ids), k, np.int64) for k, ids, _ in self._rows]
+        return FeatureTracks(
+            frame=np.concatenate(frames) if frames else np.zeros(0, np.int64),
+            feature_id=np.concatenate([ids for _, ids, _ in self._rows]) if frames else np.zeros(0, np.int64),
+            uv=np.concatenate([uv for _, _, uv in self._rows]).reshape(-1, 2) if frames else np.zeros((0, 2)),
+            R_cw=dict(self._R_cw), p_cw=dict(self._p_cw), points=dict(self._points))
+
+
+# --------------------------------------------------------------------------------------------------
+# The civera-radial projection with its Jacobians (docs/sog.md §5, vectorised)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+def _left_jacobian_so3(theta: np.ndarray) -> np.ndarray:
+    """J_l(θ) (n, 3, 3): d exp([θ + δ]×) = [J_l δ]× exp([θ]×) to first order."""
+    angle = np.linalg.norm(theta, axis=-1)[..., None, None]
+    small = angle < 1e-5
+    safe = np.where(small, 1.0, angle)
+    a = np.where(small, 0.5 - angle ** 2 / 24.0, (1.0 - np.cos(safe)) / safe ** 2)
+    b = np.where(small, 1.0 / 6.0 - angle ** 2 / 120.0, (safe - np.sin(safe)) / safe ** 3)
+    K = _skew(theta)
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def _rising_branch_end(k1: float, k2: float) -> float:
+    """The radius (mm) where r (1 + k1 r² + k2 r⁴) stops rising (inf when it never does)."""
+    roots = np.roots([5.0 * k2, 3.0 * k1, 1.0]) if k2 != 0.0 else (np.array([-1.0 / (3.0 * k1)]) if k1 != 0.0
+                                                                    else np.zeros(0))
+    s = [float(r.real) for r in np.atleast_1d(roots) if abs(r.imag) < 1e-12 and r.real > 0]
+    return float(np.sqrt(min(s))) if s else np.inf
+
+
+def _distort_offsets(a: np.ndarray, k1: float, k2: float, pixel_size_mm: np.ndarray) -> np.ndarray:
+    """Undistorted offsets from the centre (n, 2) px -> distorted offsets: r_d (mm) solves
+    r_d (1 + k1 r_d² + k2 r_d⁴) = r_u on the rising branch by Newton kept inside a bracket
+    (bisection when a step leaves it); beyond the branch r_d is its end. The offset is scaled by
+    r_d / r_u."""
+    r_u = np.linalg.norm(a * pixel_size_mm, axis=1)
+    lo = np.zeros_like(r_u)
+    hi = np.full_like(r_u, _rising_branch_end(k1, k2))
+    r_d = np.minimum(r_u, hi)
+    for _ in range(40):
+        r2 = r_d * r_d
+        g = r_d * (1.0 + r2 * (k1 + k2 * r2)) - r_u
+        dg = 1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2)
+        lo = np.where(g < 0, r_d, lo)
+        hi = np.where(g > 0, r_d, hi)
+        step = g / np.where(dg > 1e-12, dg, 1e-12)
+        new = r_d - step
+        outside = (new < lo) | (new > hi)
+        new = np.where(outside, np.where(np.isfinite(hi), 0.5 * (lo + hi), 2.0 * r_d + 1e-9), new)
+        done = np.abs(new - r_d) < 1e-14
+        r_d = new
+        if np.all(done):
+            break
+    scale = np.where(r_u > 1e-12, r_d / np.where(r_u > 1e-12, r_u, 1.0), 1.0)
+    return a * scale[:, None]
+
+
+def project_civera(camera: np.ndarray, points_c: np.ndarray, pixel_size_mm) -> np.ndarray:
+    """Distorted pixels (n, 2) of camera-frame points (n, 3) (no validity check: z > 0 assumed)."""
+    f, cx, cy, k1, k2 = camera
+    px = np.broadcast_to(np.asarray(pixel_size_mm, float).reshape(-1), (2,))
+    n = points_c[:, :2] / points_c[:, 2:3]
+    return np.array([cx, cy]) + _distort_offsets(f * n, k1, k2, px)
+
+
+@dataclass
+class BundleProblem:
+    """Observations indexed into keyframes and points; full parameter vector and which entries vary."""
+
+    obs_pose: np.ndarray      # (N,) keyframe index
+    obs_point: np.ndarray     # (N,) point index
+    uv: np.ndarray            # (N, 2)
+    R0: np.ndarray            # (K, 3, 3) rotation at which each pose's θ = 0
+    pixel_size_mm: np.ndarray
+    free: np.ndarray          # (n_full,) bool
+    x_full: np.ndarray        # the start (and the held values)
+
+    @property
+    def num_poses(self) -> int:
+        return len(self.R0)
+
+    @property
+    def num_points(self) -> int:
+        return (len(self.x_full) - self.point_offset()) // _POINT_SIZE
+
+    def pose_offset(self) -> int:
+        return _CAMERA_SIZE
+
+    def point_offset(self) -> int:
+        return _CAMERA_SIZE + _POSE_SIZE * self.num_poses
+
+    def unpack(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        full = self.x_full.copy()
+        full[self.free] = x
+        poses = full[_CAMERA_SIZE:self.point_offset()].reshape(-1, _POSE_SIZE)
+        return full[:_CAMERA_SIZE], poses[:, :3], poses[:, 3:], full[self.point_offset():].reshape(-1, 3)
+
+
+def residuals_and_jacobian(problem: BundleProblem, x: np.ndarray, jacobian: bool = True
+                           ) -> tuple[np.ndarray, Optional[scipy.sparse.csr_matrix]]:
+    """Residuals (2N,) = predicted − measured pixels, and their sparse Jacobian in the free
+    parameters (2N, n_free) (None when ``jacobian`` is False)."""
+    camera, theta, p, X = problem.unpack(x)
+    f, cx, cy, k1, k2 = camera
+    dx, dy = problem.pixel_size_mm
+    R = Rotation.from_rotvec(theta).as_matrix() @ problem.R0                 # (K, 3, 3)
+    Ri = R[problem.obs_pose]
+    RX = np.einsum("nij,nj->ni", Ri, X[problem.obs_point])
+    h = RX + p[problem.obs_pose]
+    z = np.where(h[:, 2] > 1e-6, h[:, 2], 1e-6)                                # a point behind: clamp
+    nrm = h[:, :2] / z[:, None]
+    a = f * nrm
+    delta = _distort_offsets(a, k1, k2, np.array([dx, dy]))
+    res = (np.array([cx, cy]) + delta - problem.uv).ravel()
+    if not jacobian:
+        return res, None
+    # J_U = dU/dδ = g I + 2 g' δ wᵀ, U(δ) = δ g(r²), w = (dx² δu, dy² δv) (docs/sog.md §5)
+    r2 = (dx * delta[:, 0]) ** 2 + (dy * delta[:, 1]) ** 2
+    g = 1.0 + k1 * r2 + k2 * r2 ** 2
+    gp = k1 + 2.0 * k2 * r2
+    w = delta * np.array([dx * dx, dy * dy])
+    J_U = g[:, None, None] * np.eye(2) + 2.0 * gp[:, None, None] * delta[:, :, None] * w[:, None, :]
+    J_U_inv = np.linalg.inv(J_U)
+    d_uv_d_f = np.einsum("nij,nj->ni", J_U_inv, nrm)
+    d_uv_d_k = -np.einsum("nij,njk->nik", J_U_inv, np.stack([delta * r2[:, None], delta * (r2 ** 2)[:, None]], 2))
+    d_n_d_h = np.zeros((len(h), 2, 3))
+    d_n_d_h[:, 0, 0] = d_n_d_h[:, 1, 1] = 1.0 / z
+    d_n_d_h[:, :, 2] = -nrm / z[:, None]
+    d_uv_d_h = f * np.einsum("nij,njk->nik", J_U_inv, d_n_d_h)
+    d_h_d_theta = -_skew(RX) @ _left_jacobian_so3(theta)[problem.obs_pose]
+    blocks = np.concatenate([
+        d_uv_d_f[:, :, None], np.broadcast_to(np.eye(2), (len(h), 2, 2)), d_uv_d_k,   # camera
+        d_uv_d_h @ d_h_d_theta, d_uv_d_h,                                            # pose: θ, p
+        d_uv_d_h @ Ri,                                                               # point
+    ], axis=2)                                                                       # (N, 2, 14)
+    pose0 = problem.pose_offset() + _POSE_SIZE * problem.obs_pose
+    point0 = problem.point_offset() + _POINT_SIZE * problem.obs_point
+    cols_full = np.concatenate([np.broadcast_to(np.arange(_CAMERA_SIZE), (len(h), _CAMERA_SIZE)),
+                                pose0[:, None] + np.arange(_POSE_SIZE), point0[:, None] + np.arange(_POINT_SIZE)],
+                               axis=1)                                               # (N, 14)
+    column = np.cumsum(problem.free) - 1
+    column[~problem.free] = -1
+    cols = np.broadcast_to(column[cols_full][:, None, :], blocks.shape)
+    rows = np.broadcast_to((2 * np.arange(len(h)))[:, None, None] + np.arange(2)[None, :, None], blocks.shape)
+    keep = cols >= 0
+    jac = scipy.sparse.csr_matrix((blocks[keep], (rows[keep], cols[keep])),
+                                  shape=(2 * len(h), int(problem.free.sum())))
+    return res, jac
+
+
+# --------------------------------------------------------------------------------------------------
+# The adjustment
+
+
+@dataclass
+class BundleResult:
+    """The adjusted camera ``[f, cx, cy, k1, k2]``, its covariance (5, 5) and 99 % ``bounds_99`` (5, 2)
+    from the model (independent pixel errors), the same cluster-robust by feature track
+    (``covariance_tracks``, ``bounds_99_tracks``); ``sigma_px``: the residual standard deviation
+    (robustly weighted); sizes, cost, time."""
+
+    camera: np.ndarray
+    covariance: np.ndarray
+    bounds_99: np.ndarray
+    covariance_tracks: np.ndarray
+    bounds_99_tracks: np.ndarray
+    sigma_px: float
+    keyframes: int
+    points: int
+    observations: int
+    inlier_fraction: float
+    rms_px: float
+    nfev: int
+    status: int
+    message: str
+    elapsed_s: float
+    start: np.ndarray
+    extra: dict = field(default_factory=dict)
+
+    def summary_dict(self) -> dict:
+        names = ("f", "cx", "cy", "k1", "k2")
+        out = {n: float(v) for n, v in zip(names, self.camera)}
+        out.update({f"{n}_bounds_99": [float(b[0]), float(b[1])] for n, b in zip(names, self.bounds_99)})
+        out.update({f"{n}_bounds_99_tracks": [float(b[0]), float(b[1])] for n, b in zip(names, self.bounds_99_tracks)})
+        out.update(sigma=dict(zip(names, np.sqrt(np.diag(self.covariance)).tolist())),
+                   sigma_tracks=dict(zip(names, np.sqrt(np.diag(self.covariance_tracks)).tolist())),
+                   sigma_px=self.sigma_px,
+                   keyframes=self.keyframes, points=self.points, observations=self.observations,
+                   inlier_fraction=self.inlier_fraction, rms_px=self.rms_px, nfev=self.nfev, status=self.status,
+                   message=self.message, elapsed_s=self.elapsed_s, start=self.start.tolist(), **self.extra)
+        return out
+
+
+def build_problem(tracks: FeatureTracks, camera0: np.ndarray, pixel_size_mm: np.ndarray, keyframe_step: int,
+                   min_views: int, max_track_frames: Optional[int] = None) -> BundleProblem:
+    """The adjustment's problem: observations of features seen in >= ``min_views`` keyframes (every
+    ``keyframe_step``-th recorded frame), started from ``camera0`` and the filter's poses and points,
+    with the gauge held (module docstring); tracks cut into points of at most ``max_track_frames``
+    frames each (None: whole tracks)."""
+    frames = np.array(sorted(tracks.R_cw))
+    keyframes = frames[::keyframe_step]
+    key_index = {int(k): i for i, k in enumerate(keyframes)}
+    on_key = np.isin(tracks.frame, keyframes) & np.isin(tracks.feature_id, list(tracks.points))
+    fid, frame, uv = tracks.feature_id[on_key], tracks.frame[on_key], tracks.uv[on_key]
+    # one observation per (feature, keyframe): the first
+    _, first = np.unique(np.c_[fid, frame], axis=0, return_index=True)
+    fid, frame, uv = fid[first], frame[first], uv[first]
+    R0 = np.array([tracks.R_cw[int(k)] for k in keyframes])
+    p0 = np.array([tracks.p_cw[int(k)] for k in keyframes])
+    pose_of = np.array([key_index[int(k)] for k in frame], dtype=np.int64)
+    points = {i: tracks.points[int(i)] for i in np.unique(fid)}
+    # drop observations of points behind the camera at the start, then features seen too rarely
+    X = np.array([points[int(i)] for i in fid]).reshape(-1, 3)
+    depth = np.einsum("nij,nj->ni", R0[pose_of], X)[:, 2] + p0[pose_of, 2]
+    ok = depth > 1e-3
+    fid, frame, pose_of, uv = fid[ok], frame[ok], pose_of[ok], uv[ok]
+    # a track longer than max_track_frames becomes several points: the front end's match drifts
+    # with the age of its patch (docs/sog.md §1), and a fresh point absorbs the offset so far
+    segment = np.zeros(len(fid), np.int64)
+    if max_track_frames is not None:
+        start = {}
+        for i, k in zip(fid.tolist(), frame.tolist()):
+            start[i] = min(k, start.get(i, k))
+        segment = (frame - np.array([start[i] for i in fid.tolist()], dtype=np.int64)) // int(max_track_frames)
+    pairs, point_of, counts = np.unique(np.c_[fid, segment], axis=0, return_inverse=True, return_counts=True)
+    point_of = point_of.reshape(-1)
+    keep = counts >= min_views
+    ok = keep[point_of]
+    fid, pose_of, uv = fid[ok], pose_of[ok], uv[ok]
+    point_of = (np.cumsum(keep) - 1)[point_of[ok]]
+    keep_ids = pairs[keep, 0]
+    if len(keep_ids) < 10:
+        raise InputError(f"bundle adjustment: only {len(keep_ids)} features seen in >= {min_views} keyframes")
+    X0 = np.array([points[int(i)] for i in keep_ids])
+    x_full = np.concatenate([np.asarray(camera0, float), np.c_[np.zeros((len(keyframes), 3)), p0].ravel(), X0.ravel()])
+    free = np.ones(len(x_full), bool)
+    free[_CAMERA_SIZE:_CAMERA_SIZE + _POSE_SIZE] = False          # the first keyframe's pose
+    in_first = point_of[pose_of == 0]
+    if len(in_first) == 0:
+        raise InputError("bundle adjustment: no feature seen in the first keyframe (scale gauge)")
+    anchor = np.bincount(point_of, minlength=len(keep_ids))[in_first].argmax()
+    free[_CAMERA_SIZE + _POSE_SIZE * len(keyframes) + _POINT_SIZE * in_first[anchor] + 2] = False  # its z
+    return BundleProblem(obs_pose=pose_of, obs_point=point_of, uv=uv, R0=R0, pixel_size_mm=pixel_size_mm, free=free,
+                    x_full=x_full)
+
+
+def _camera_columns_of_inverse(problem: BundleProblem, H: scipy.sparse.csr_matrix) -> np.ndarray:
+    """H⁻¹ E_camera (n, 5) of the normal matrix H (n, n) through the Schur complement of the points
+    (block diagonal, one block per point): S = A − B C⁻¹ Bᵀ over the camera and poses, then
+    H⁻¹ E = [S⁻¹ E; −C⁻¹ Bᵀ S⁻¹ E]. Jacobi-scaled first; pseudo-inverses where singular."""
+    scale = 1.0 / np.sqrt(np.maximum(H.diagonal(), 1e-300))
+    Hs = (scipy.sparse.diags(scale) @ H @ scipy.sparse.diags(scale)).tocsr()
+    na = problem.point_offset() - _POSE_SIZE                      # free camera and pose columns
+    block = np.repeat(np.arange(problem.num_points), _POINT_SIZE)[problem.free[problem.point_offset():]]
+    size = np.bincount(block, minlength=problem.num_points)
+    first = np.r_[0, np.cumsum(size)[:-1]]
+    slot = np.arange(len(block)) - first[block]
+    C = Hs[na:, na:].tocoo()
+    blocks = np.zeros((problem.num_points, _POINT_SIZE, _POINT_SIZE))
+    blocks[block[C.row], slot[C.row], slot[C.col]] = C.data
+    for b in np.flatnonzero(size < _POINT_SIZE):                 # the anchor: its z is held
+        blocks[b, size[b]:, size[b]:] = np.eye(_POINT_SIZE - size[b])
+    blocks_inv = np.linalg.pinv(blocks, hermitian=True)
+    other = np.arange(_POINT_SIZE)[None, :]
+    valid = other < size[block][:, None]
+    rows = np.broadcast_to(np.arange(len(block))[:, None], valid.shape)[valid]
+    cols = (first[block][:, None] + other)[valid]
+    data = blocks_inv[block[:, None], slot[:, None], other][valid]
+    C_inv = scipy.sparse.csr_matrix((data, (rows, cols)), shape=(len(block), len(block)))
+    B = Hs[:na, na:]
+    S = Hs[:na, :na].toarray() - (B @ C_inv @ B.T).toarray()
+    rhs = np.zeros((na, _CAMERA_SIZE))
+    rhs[:_CAMERA_SIZE] = np.diag(scale[:_CAMERA_SIZE])            # the camera is always free and first
+    try:
+        z_a = scipy.linalg.solve(S, rhs, assume_a="pos")
+    except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
+        z_a = np.linalg.lstsq(S, rhs, rcond=1e-12)[0]
+    z_b = -(C_inv @ (B.T @ z_a))
+    return scale[:, None] * np.vstack([z_a, z_b])
+
+
+def _camera_covariance(problem: BundleProblem, x: np.ndarray, loss_scale_px: float
+                       ) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """The camera's (5, 5) covariance two ways: from the model, σ² (Jᵀ W J)⁻¹ (independent pixel
+    errors), and cluster-robust by feature track, H⁻¹ (Σ_j g_j g_jᵀ) H⁻¹ · G / (G − 1) with g_j = J_jᵀ W r_j
+    summed over track j (errors correlated along a track, e.g. a patch drifting); then the weighted
+    residual sigma (px) and the fraction of residuals inside the loss scale. W: the soft_l1
+    weights ρ'(z) = (1 + z)^-½, z = (r / scale)²."""
+    res, jac = residuals_and_jacobian(problem, x)
+    weight = 1.0 / np.sqrt(1.0 + (res / loss_scale_px) ** 2)
+    dof = max(len(res) - jac.shape[1], 1)
+    sigma2 = float(np.sum(weight * res ** 2) / dof)
+    z = _camera_columns_of_inverse(problem, (jac.T @ scipy.sparse.diags(weight) @ jac).tocsr())
+    cov = sigma2 * z[:_CAMERA_SIZE]
+    per_residual = (jac @ z) * (weight * res)[:, None]     # (2N, 5): each residual's share of Zᵀ g
+    tracks = np.repeat(problem.obs_point, 2)
+    per_track = np.zeros((problem.num_points, _CAMERA_SIZE))
+    np.add.at(per_track, tracks, per_residual)
+    count = len(per_track)
+    cov_tracks = per_track.T @ per_track * count / max(count - 1, 1)
+    return cov, cov_tracks, float(np.sqrt(sigma2)), float(np.mean(np.abs(res) <= loss_scale_px))
+
+
+def bundle_adjust(tracks: FeatureTracks, camera0: Sequence[float], pixel_size_mm: Union[float, Sequence[float]], *,
+                  keyframe_step: int = 3, min_views: int = 3, loss_scale_px: float = 2.0,
+                  max_nfev: int = 300, ftol: float = 1e-6, max_track_frames: Optional[int] = None) -> BundleResult:
+    """Adjust the camera, keyframe poses (every ``keyframe_step``-th recorded frame) and points
+    (features seen in >= ``min_views`` keyframes) from ``camera0`` and the filter's poses and
+    points; soft_l1 loss at ``loss_scale_px``."""
+    if len(tracks) == 0:
+        raise InputError("bundle adjustment: no tracks")
+    started = time.perf_counter()
+    px = np.broadcast_to(np.asarray(pixel_size_mm, float).reshape(-1), (2,)).copy()
+    problem = build_problem(tracks, np.asarray(camera0, float), px, keyframe_step, min_views, max_track_frames)
+    x0 = problem.x_full[problem.free]
+    lower = np.full(len(x0), -np.inf)
+    lower[0] = 1.0    # f > 0: from a poor start the mirrored camera (f < 0) is a solution too
+    fit = least_squares(lambda x: residuals_and_jacobian(problem, x, jacobian=False)[0], x0,
+                        jac=lambda x: residuals_and_jacobian(problem, x)[1],
+                        method="trf", tr_solver="lsmr", x_scale="jac",
+                        # tight LSMR tolerances (the default's inexact steps crawl: 200+ evaluations);
+                        # TRF still creeps near the minimum, so stop at a 1e-6 relative cost change
+                        # (f then within ~0.02 % of the full convergence, far inside its sigma)
+                        tr_options={"atol": 1e-12, "btol": 1e-12}, ftol=ftol, loss="soft_l1", f_scale=loss_scale_px,
+                        bounds=(lower, np.inf), max_nfev=max_nfev)
+    camera = problem.unpack(fit.x)[0]
+    cov, cov_tracks, sigma_px, inliers = _camera_covariance(problem, fit.x, loss_scale_px)
+    half = _Z99 * np.sqrt(np.maximum(np.diag(cov), 0.0))
+    half_tracks = _Z99 * np.sqrt(np.maximum(np.diag(cov_tracks), 0.0))
+    return BundleResult(camera=camera, covariance=cov, bounds_99=np.c_[camera - half, camera + half],
+                        covariance_tracks=cov_tracks, bounds_99_tracks=np.c_[camera - half_tracks, camera + half_tracks],
+                        sigma_px=sigma_px, keyframes=problem.num_poses, points=int(problem.obs_point.max()) + 1,
+                        observations=len(problem.uv), inlier_fraction=inliers,
+                        rms_px=float(np.sqrt(np.mean(fit.fun ** 2))), nfev=int(fit.nfev), status=int(fit.status),
+                        message=str(fit.message), elapsed_s=time.perf_counter() - started,
+                        start=np.asarray(camera0, float))
