@@ -1,5 +1,6 @@
 #include "solver_common.hpp"
 
+#include <iostream>
 #include <memory>
 #include <optional>
 #include <utility>
@@ -245,6 +246,8 @@ SolveResult SolveWithCovariance(const SolveSettings& settings, double* line_dela
     }
     ceres::Solver::Summary ceres_summary;
     ceres::Solve(settings.solver, problem.get(), &ceres_summary);
+    if (settings.solver.minimizer_progress_to_stdout)
+      std::cerr << ceres_summary.FullReport() << "\n";
     result.iterations += static_cast<int>(ceres_summary.iterations.size());
     result.outer_iterations = outer + 1;
     result.converged = ceres_summary.termination_type == ceres::CONVERGENCE;

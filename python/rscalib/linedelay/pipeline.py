@@ -14,7 +14,6 @@ before the solve; `on_round(RoundRecord)` after each knot-adaptation round of th
 from __future__ import annotations
 
 import math
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional, Union
@@ -43,7 +42,7 @@ from .guidance import capture_guidance
 from .linear import LinearInterpResult, calibrate_line_delay_linear
 from .pnp import PnpTrajectory, compare_with_pnp, per_frame_pnp, pnp_trajectory
 from .readout import READOUTS, rotation_hint, time_window, to_top_down
-from .spline import LineDelayResult, RoundRecord, calibrate_line_delay, localize
+from .spline import LineDelayResult, RoundRecord, calibrate_line_delay, joined_trajectory, localize
 
 TRAJECTORY_MODELS = ("spline", "linear")    # calibrate_video: `rscalib linedelay --trajectory`
 LOCALIZE_MODELS = ("rs-spline", "gs-pnp")   # localize_video: `rscalib localize --model`
@@ -196,28 +195,27 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
                        min_segment_s=min_segment_s, noise_model=noise_model, **knots)
         if refine_intrinsics:  # absent otherwise: the default path's calls are unchanged
             options |= {"refine_intrinsics": True, "intrinsics_prior": intrinsics_prior}
-        # The halves do not need the whole video's answer: they are solved in other threads meanwhile
-        # (the solver releases the GIL), from the same per-frame poses; after it when the memory
-        # would not hold the three solves at once (together about two whole ones).
-        # One PnP pass seeds all three (each frame's pose is its own: the halves' are the same). Bad
-        # input is left to calibrate_line_delay, whose checks come first and say what is wrong.
+        # One PnP pass seeds both halves and the whole video (each frame's pose is its own: the halves'
+        # are the same). The self-check's halves are solved first, side by side in two threads (the
+        # solver releases the GIL), each from its own PnP start: independent estimates. The whole video
+        # then starts from their trajectories, knots and d, and adapts on from there (a round or two
+        # instead of five: docs/formulation.md §9). Bad input is left to calibrate_line_delay, whose
+        # checks say what is wrong.
         poses = None
         if self_check and observations.num_frames >= 4 and _fits_in_memory(observations.num_observations):
             poses = per_frame_pnp(observations, solve_camera)
+        solved_halves = {}
 
         def solve_half(half):
             shared = None if poses is None else poses.of_frames(observations.frame_times_s, half.frame_times_s)
-            return calibrate_line_delay(half, solve_camera, rows, **options, frame_poses=shared)
+            solved = calibrate_line_delay(half, solve_camera, rows, **options, frame_poses=shared)
+            solved_halves[float(half.frame_times_s[0])] = solved
+            return solved
 
-        def solve_halves():
-            return selfcheck.halves(observations, solve_half)
-
-        alongside = self_check and _fits_in_memory(2 * observations.num_observations)
-        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="rscalib-selfcheck") as pool:
-            halves = pool.submit(solve_halves) if alongside else None
-            result = calibrate_line_delay(observations, solve_camera, rows, progress=on_round, frame_poses=poses,
-                                          **options)
-            check = halves.result() if alongside else solve_halves() if self_check else None
+        check = selfcheck.halves(observations, solve_half) if self_check else None
+        start = _start_from_halves([solved_halves[t] for t in sorted(solved_halves)], options)
+        result = calibrate_line_delay(observations, solve_camera, rows, progress=on_round, frame_poses=poses,
+                                      **(options | start))
         if self_check:
             result.self_check = check
             result.line_delay_std_s = selfcheck.widened_std(result.line_delay_std_s, check)
@@ -243,6 +241,20 @@ def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, mode
     except Exception as error:  # noqa: BLE001 - advice must never cost the result
         run.guidance = {"advice": [], "error": f"{type(error).__name__}: {error}"}
     return run
+
+
+def _start_from_halves(halves: list, options: dict) -> dict:
+    """calibrate_line_delay's start for the whole video from its two solved halves: their joined
+    trajectory and the inverse-variance mean of their d; {} (the PnP start) without both halves or
+    with fixed knots."""
+    if len(halves) != 2 or "num_segments" in options:
+        return {}
+    weights = [1.0 / h.line_delay_std_s ** 2 if h.determined and 0 < h.line_delay_std_s < math.inf else 0.0
+               for h in halves]
+    if not sum(weights) > 0:
+        return {}
+    d = sum(w * h.line_delay_s for w, h in zip(weights, halves)) / sum(weights)
+    return {"start_trajectory": joined_trajectory([h.trajectory for h in halves]), "line_delay0_s": d}
 
 
 def _fits_in_memory(num_observations: int) -> bool:

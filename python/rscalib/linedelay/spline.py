@@ -171,6 +171,33 @@ def initial_trajectory(observations: Observations, poses: FramePoses, line_delay
     return _core.fit_bspline(knots, times, samples, acceleration_weight=[acceleration_weight])
 
 
+def _segment_samples(breakpoints: np.ndarray) -> np.ndarray:
+    # 8 samples a segment: more than the 4 that determine a cubic piece
+    return np.unique(np.concatenate([np.linspace(a, b, 8) for a, b in zip(breakpoints[:-1], breakpoints[1:])]))
+
+
+def restricted_trajectory(trajectory: BSpline, t_begin: float, t_end: float, min_segment_s: float) -> BSpline:
+    """`trajectory` on [t_begin, t_end] with its breakpoints there (those closer than min_segment_s
+    to an end dropped), fitted to samples of it: where the knots are the same it is the same curve."""
+    breaks = np.asarray(trajectory.breakpoints)
+    inside = breaks[(breaks > t_begin + min_segment_s) & (breaks < t_end - min_segment_s)]
+    breakpoints = np.r_[t_begin, inside, t_end]
+    times = _segment_samples(breakpoints)
+    samples = trajectory.evaluate(np.clip(times, trajectory.t_begin, trajectory.t_end))
+    return _core.fit_bspline(BSpline.clamped_knots(breakpoints), times, samples)
+
+
+def joined_trajectory(pieces: list[BSpline], acceleration_weight: float = 1e-9) -> BSpline:
+    """One spline through consecutive trajectories (e.g. the self-check's halves): all their
+    breakpoints, fitted to samples of each on its own span; a gap between them is bridged smoothly (the
+    acceleration weight: just enough to determine control points no sample reaches)."""
+    breaks = np.unique(np.concatenate([np.asarray(p.breakpoints) for p in pieces]))
+    times = [_segment_samples(np.asarray(p.breakpoints)) for p in pieces]
+    samples = np.vstack([p.evaluate(t) for p, t in zip(pieces, times)])
+    return _core.fit_bspline(BSpline.clamped_knots(breaks), np.concatenate(times), samples,
+                             acceleration_weight=[acceleration_weight])
+
+
 def _split_segments(trajectory: BSpline, segment_cost, segment_count, min_segment_s: float,
                     margin_sigmas: float, correlation: float = 0.0) -> tuple[list[float], int]:
     """Midpoints of the segments with J_j >= 2 N_j + margin * sqrt(4 N_j c) (paper §4.3 step 5
@@ -209,6 +236,7 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                          intrinsics_prior: Optional[IntrinsicsPrior] = None,
                          line_delay_score: bool = False,
                          frame_poses: Optional[FramePoses] = None,
+                         start_trajectory: Optional[BSpline] = None,
                          progress: Optional[Callable[[RoundRecord], None]] = None) -> LineDelayResult:
     """Estimate the line delay d (s/row) and the continuous-time trajectory (Oth et al. 2013 §3-4).
 
@@ -229,6 +257,9 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
     `intrinsics` (with the covariance of [d, intrinsics]) hold the outcome (docs/formulation.md §14).
     frame_poses: pnp.per_frame_pnp(observations, camera) when already computed (the self-check's
     halves take theirs from the whole video's: FramePoses.of_frames).
+    start_trajectory: a solved trajectory to start from instead of the PnP smoothing spline (the
+    self-check's halves start from the whole video's, with line_delay0_s its d): its knots inside this
+    data's time span are the first round's, and the adaptation goes on from there (docs/formulation.md §9).
     line_delay_score: also return each observation's linearised contribution to d
     (`result.line_delay_score`, for experiments on correlated errors: docs/experiments.md).
     progress: called after each round.
@@ -241,7 +272,8 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
                 use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
                 robust_loss=robust_loss, num_threads=num_threads, noise_model=noise_model,
                 refine_intrinsics=refine_intrinsics, intrinsics_prior=intrinsics_prior,
-                line_delay_score=line_delay_score, frame_poses=frame_poses, progress=progress)
+                line_delay_score=line_delay_score, frame_poses=frame_poses,
+                start_trajectory=start_trajectory, progress=progress)
 
 
 def localize(observations: Observations, camera: CameraModel, rows: Optional[int] = None,
@@ -258,7 +290,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
          min_segment_s=None, split_margin_sigmas=2.0, standardise_errors=True, use_motion_prior=True,
          motion_prior_q=DEFAULT_MOTION_PRIOR_Q, robust_loss="none", num_threads=2, noise_model="frame",
          refine_intrinsics=False, intrinsics_prior=None, line_delay_score=False, frame_poses=None,
-         progress=None) -> LineDelayResult:
+         start_trajectory=None, progress=None) -> LineDelayResult:
     if noise_model not in NOISE_MODELS:
         raise InputError(f"unknown noise model {noise_model!r} ({', '.join(NOISE_MODELS)})")
     started = time.perf_counter()
@@ -284,7 +316,10 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         initial_segments_per_s = max(fps / 4.0, 7.5)
     check_segment_count(num_segments, used.num_frames)
     segments = int(num_segments) if num_segments else max(1, int(math.ceil(duration * initial_segments_per_s)))
-    trajectory = initial_trajectory(used, used_poses, d, segments, t_begin, t_end)
+    if start_trajectory is not None and adaptive_knots and not num_segments:
+        trajectory = restricted_trajectory(start_trajectory, t_begin, t_end, min_segment_s)
+    else:
+        trajectory = initial_trajectory(used, used_poses, d, segments, t_begin, t_end)
 
     options = _solver_options(sigma, estimate_line_delay=estimate, standardise_errors=standardise_errors,
                               use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
@@ -321,7 +356,8 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     final = False
     for round_index in range(max(1, max_rounds)):
         last_chance = round_index == max_rounds - 1
-        _set_tolerance(options, final=final, covariance=False)
+        # a final round usually ends the adaptation: sigma_d comes with it (wasted if it splits again)
+        _set_tolerance(options, final=final, covariance=final and estimate)
         summary = _core.solve_line_delay(*args, trajectory, d, options)
         d = summary.line_delay_s
         if refine_intrinsics:  # the next round starts from the refined camera
@@ -360,13 +396,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         warnings.append(f"knot adaptation stopped at the round cap ({max_rounds}) with segments still "
                         "above their expected cost")
 
-    if final and adapted:
-        if estimate:  # sigma_d at the final estimate: only the covariance, nothing moves
-            _set_tolerance(options, final=True, covariance=True)
-            options.max_iterations = 0
-            summary = _core.solve_line_delay(*args, trajectory, d, options)
-            history[-1].solve_time_s += summary.solve_time_s
-    else:
+    if not (final and adapted):
         # Final polish at tight tolerance on the final knots, with the covariance of d.
         _set_tolerance(options, final=True, covariance=estimate)
         summary = _core.solve_line_delay(*args, trajectory, d, options)

@@ -29,13 +29,31 @@ def files(video):
     return video / "video.avi", video / "target.yaml", video / "camera.yaml"
 
 
+def _halves_then_whole(observations, camera):
+    """What calibrate_video documents: the halves from their own PnP starts, then the whole video from
+    their joined trajectory and mean d (pipeline._start_from_halves)."""
+    from rscalib.linedelay import selfcheck
+
+    solved = []
+
+    def solve(half):
+        solved.append(calibrate_line_delay(half, camera))
+        return solved[-1]
+
+    check = selfcheck.halves(observations, solve, parallel=False)
+    start = pipeline._start_from_halves(solved, {})
+    return calibrate_line_delay(observations, camera, **start), check, start
+
+
 def test_calibrate_video_is_detect_then_the_engine(video, tmp_path):
     detected, rounds = [], []
     run = pipeline.calibrate_video(*files(video), cache_dir=tmp_path / "cache", on_detection=detected.append,
                                    on_round=rounds.append)
     camera = load_camera(video / "camera.yaml").camera
     detection = pipeline.detect(*files(video)[:2], camera, cache_dir=tmp_path / "cache")
-    direct = calibrate_line_delay(detection.observations, camera)
+    direct, check, start = _halves_then_whole(detection.observations, camera)
+    assert start, "both halves solved: the whole video starts from them"
+    assert run.result.self_check == check
     assert run.model == "spline" and run.command == "linedelay"
     assert run.result.line_delay_s == direct.line_delay_s
     assert run.result.line_delay_std_s == direct.line_delay_std_s
@@ -54,20 +72,17 @@ def test_calibrate_video_is_detect_then_the_engine(video, tmp_path):
     assert any("compressed to 0.10 bit/pixel" in line for line in low["advice"])
 
 
-def test_the_self_check_is_the_same_alongside_the_whole_solve_or_after_it(video, tmp_path, monkeypatch):
-    """The halves run beside the whole solve (issue 17) unless memory would not hold the three solves;
-    both ways give the check selfcheck.halves gives on the detected frames, and the same d."""
-    from rscalib.linedelay import selfcheck
-
-    alongside = pipeline.calibrate_video(*files(video), cache_dir=tmp_path / "cache")
-    monkeypatch.setattr(pipeline, "_fits_in_memory", lambda num_observations: False)
-    after = pipeline.calibrate_video(*files(video), cache_dir=tmp_path / "cache")
+def test_the_whole_video_starting_from_its_halves_agrees_with_the_pnp_start(video, tmp_path):
+    """The halves' joined trajectory is only a start (issue 17): the whole video's d is the one the PnP
+    start gives, to a small fraction of sigma_d, and without the self-check the PnP start is used."""
+    plain = pipeline.calibrate_video(*files(video), cache_dir=tmp_path / "cache", self_check=False)
     camera = load_camera(video / "camera.yaml").camera
     observations = pipeline.detect(*files(video)[:2], camera, cache_dir=tmp_path / "cache").observations
-    direct = selfcheck.halves(observations, lambda half: calibrate_line_delay(half, camera), parallel=False)
-    assert alongside.result.self_check == after.result.self_check == direct
-    assert len(direct["halves"]) == 2 and direct["z"] is not None
-    assert alongside.result.line_delay_s == after.result.line_delay_s
+    from_pnp = calibrate_line_delay(observations, camera)
+    assert plain.result.line_delay_s == from_pnp.line_delay_s and plain.result.self_check is None
+    seeded = pipeline.calibrate_video(*files(video), cache_dir=tmp_path / "cache")
+    assert abs(seeded.result.line_delay_s - from_pnp.line_delay_s) < 0.3 * from_pnp.line_delay_std_s
+    assert seeded.result.solver_line_delay_std_s == pytest.approx(from_pnp.solver_line_delay_std_s, rel=0.1)
 
 
 def test_linear_writes_a_report_through_the_same_writers(video, tmp_path):

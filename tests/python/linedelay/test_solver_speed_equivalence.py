@@ -170,3 +170,45 @@ def test_the_cli_knows_no_report(capsys):
     with pytest.raises(SystemExit):
         cli_main(["linedelay", "--help"])
     assert "--no-report" in capsys.readouterr().out
+
+
+def test_a_restricted_or_joined_trajectory_is_the_same_curve_where_the_knots_are(problem):
+    """The halves' start (issue 17): a solved trajectory cut to a sub-span, and two cut pieces joined
+    again, reproduce the original curve (evaluated independently of the fit) to rounding."""
+    _, _, result, _ = problem
+    full = result.trajectory
+    breaks = np.asarray(full.breakpoints)
+    t_mid = float(breaks[len(breaks) // 2])          # a shared breakpoint: both pieces are exact
+    first = spline.restricted_trajectory(full, full.t_begin, t_mid, 1e-3)
+    second = spline.restricted_trajectory(full, t_mid, full.t_end, 1e-3)
+    assert first.num_segments + second.num_segments == full.num_segments
+    times = np.linspace(full.t_begin, full.t_end, 997)
+    for piece in (first, second):
+        inside = times[(times >= piece.t_begin) & (times <= piece.t_end)]
+        np.testing.assert_allclose(piece.evaluate(inside), full.evaluate(inside), atol=1e-9)
+    joined = spline.joined_trajectory([first, second])
+    np.testing.assert_array_equal(joined.breakpoints, breaks)
+    np.testing.assert_allclose(joined.evaluate(times), full.evaluate(times), atol=1e-5)
+    # halves with a gap between them (missing frames): bridged, close to the curve on both sides
+    gapped = spline.joined_trajectory([spline.restricted_trajectory(full, full.t_begin, float(breaks[5]), 1e-3),
+                                       spline.restricted_trajectory(full, float(breaks[9]), full.t_end, 1e-3)])
+    assert np.all(np.isfinite(gapped.control_points))
+    covered = times[(times <= breaks[4]) | (times >= breaks[10])]
+    np.testing.assert_allclose(gapped.evaluate(covered), full.evaluate(covered), atol=1e-3)
+    # a cut between breakpoints leaves a piece that still follows the curve where the knots are the same
+    cut = spline.restricted_trajectory(full, 0.5 * (breaks[3] + breaks[4]), full.t_end, 1e-3)
+    inner = times[times >= breaks[6]]
+    np.testing.assert_allclose(cut.evaluate(inner), full.evaluate(inner), atol=1e-6)
+
+
+def test_a_start_trajectory_ends_where_the_pnp_start_does(problem):
+    """calibrate_line_delay from a given trajectory (the whole video from its halves): the same d to a
+    small fraction of sigma_d, and the split test satisfied on the final knots."""
+    sim, camera, default, _ = problem
+    start = spline.restricted_trajectory(default.trajectory, default.trajectory.t_begin,
+                                         default.trajectory.t_end, 1e-3)
+    seeded = spline.calibrate_line_delay(sim.observations, camera, start_trajectory=start,
+                                         line_delay0_s=default.line_delay_s * 1.01)
+    assert abs(seeded.line_delay_s - default.line_delay_s) < 0.05 * default.line_delay_std_s
+    assert seeded.history[-1].segments_split == 0 and len(seeded.history) <= 2
+    assert seeded.num_segments >= default.num_segments

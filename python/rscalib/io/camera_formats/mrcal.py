@@ -147,8 +147,8 @@ def write_corners_vnl(path, frame_names: list, frame_index: np.ndarray, point_id
         table = np.full((width * height, 2), np.nan)
         table[point_id[mine]] = uv[mine]
         safe = re.sub(r"\s", "_", str(name))
-        for u, v in table:
-            rows.append(f"{safe} - - -" if not np.isfinite(u) else f"{safe} {u:.6f} {v:.6f} 0")
+        # Python floats format several times faster than NumPy scalars (u != u: NaN, not detected)
+        rows.extend(f"{safe} - - -" if u != u else f"{safe} {u:.6f} {v:.6f} 0" for u, v in table.tolist())
         frames += 1
     Path(path).write_text("\n".join(rows) + "\n")
     return frames
