@@ -3,7 +3,9 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <unordered_map>
 #include <utility>
+#include <vector>
 
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
@@ -27,6 +29,60 @@ std::unique_ptr<ceres::LossFunction> MakeRobustLoss(const std::string& name, dou
   if (name == "huber") return std::make_unique<ceres::HuberLoss>(scale);
   if (name == "cauchy") return std::make_unique<ceres::CauchyLoss>(scale);
   return nullptr;
+}
+
+// J^T J (num_cols square) of the residual blocks without their loss, columns of each parameter
+// block from first_column; an empty matrix when a block cannot be evaluated.
+Eigen::SparseMatrix<double> NormalMatrix(const ceres::Problem& problem,
+                                         const std::vector<ceres::ResidualBlockId>& residual_blocks,
+                                         const std::unordered_map<const double*, int>& first_column,
+                                         int num_cols) {
+  using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  std::vector<Eigen::Triplet<double>> triplets;
+  Eigen::SparseMatrix<double> h(num_cols, num_cols);
+  std::vector<double*> parameters;
+  std::vector<RowMajor> jacobians;
+  std::vector<double*> jacobian_ptrs;
+  std::vector<double> residuals;
+  RowMajor stacked, jtj;
+  std::vector<int> columns;
+  constexpr size_t kTripletsPerFlush = size_t{1} << 22;  // bounded memory on long videos
+  for (const ceres::ResidualBlockId id : residual_blocks) {
+    problem.GetParameterBlocksForResidualBlock(id, &parameters);
+    const int rows = problem.GetCostFunctionForResidualBlock(id)->num_residuals();
+    int width = 0;
+    jacobians.resize(parameters.size());
+    jacobian_ptrs.resize(parameters.size());
+    columns.clear();
+    for (size_t b = 0; b < parameters.size(); ++b) {
+      const int size = problem.ParameterBlockSize(parameters[b]);
+      jacobians[b].resize(rows, size);
+      jacobian_ptrs[b] = jacobians[b].data();
+      const int first = first_column.at(parameters[b]);
+      for (int c = 0; c < size; ++c) columns.push_back(first + c);
+      width += size;
+    }
+    residuals.resize(rows);
+    double cost = 0.0;
+    if (!problem.EvaluateResidualBlock(id, false, &cost, residuals.data(), jacobian_ptrs.data()))
+      return {};
+    stacked.resize(rows, width);
+    for (size_t b = 0, col = 0; b < parameters.size(); col += jacobians[b].cols(), ++b)
+      stacked.middleCols(static_cast<Eigen::Index>(col), jacobians[b].cols()) = jacobians[b];
+    jtj.noalias() = stacked.transpose() * stacked;
+    for (int i = 0; i < width; ++i)
+      for (int j = 0; j < width; ++j) triplets.emplace_back(columns[i], columns[j], jtj(i, j));
+    if (triplets.size() >= kTripletsPerFlush) {
+      Eigen::SparseMatrix<double> part(num_cols, num_cols);
+      part.setFromTriplets(triplets.begin(), triplets.end());
+      h += part;
+      triplets.clear();
+    }
+  }
+  Eigen::SparseMatrix<double> part(num_cols, num_cols);
+  part.setFromTriplets(triplets.begin(), triplets.end());
+  h += part;
+  return h;
 }
 
 // Variance of the 1-D parameter block `parameter` of `problem` at its current value (Ceres'
@@ -106,25 +162,25 @@ std::optional<double> SchurVariance(
   std::vector<ceres::ResidualBlockId> residual_blocks;
   problem->GetResidualBlocks(&residual_blocks);
 
-  // H = sum over chunks of J_chunk^T J_chunk: the whole Jacobian is never held at once.
+  // H = J^T J from each residual block's own Jacobian (a few dense blocks): cheaper than
+  // Ceres' CRS Jacobian and a sparse-sparse product, and the whole Jacobian is never held.
   using SparseMatrix = Eigen::SparseMatrix<double>;
-  SparseMatrix h(num_cols, num_cols);
+  std::unordered_map<const double*, int> first_column;
+  {
+    int column = 0;
+    for (double* block : blocks) {
+      if (problem->ParameterBlockSize(block) != problem->ParameterBlockTangentSize(block))
+        return std::nullopt;  // a manifold: Ceres' covariance handles it
+      first_column[block] = column;
+      column += problem->ParameterBlockSize(block);
+    }
+  }
+  SparseMatrix h = NormalMatrix(*problem, residual_blocks, first_column, num_cols);
+  if (h.rows() != num_cols) return std::nullopt;
   ceres::Problem::EvaluateOptions evaluate_options;
   evaluate_options.parameter_blocks = blocks;
   evaluate_options.num_threads = std::max(1, num_threads);
   constexpr size_t kChunk = 16384;
-  for (size_t begin = 0; begin < residual_blocks.size(); begin += kChunk) {
-    const size_t end = std::min(residual_blocks.size(), begin + kChunk);
-    evaluate_options.residual_blocks.assign(residual_blocks.begin() + begin,
-                                            residual_blocks.begin() + end);
-    ceres::CRSMatrix jacobian;
-    if (!problem->Evaluate(evaluate_options, nullptr, nullptr, nullptr, &jacobian))
-      return std::nullopt;
-    const Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>> j(
-        jacobian.num_rows, jacobian.num_cols, static_cast<Eigen::Index>(jacobian.values.size()),
-        jacobian.rows.data(), jacobian.cols.data(), jacobian.values.data());
-    h += SparseMatrix(j.transpose() * j);
-  }
 
   const Eigen::Index n = num_cols - 1;
   const double h_dd = h.coeff(0, 0);
