@@ -1,6 +1,8 @@
 """Quality checks of one detection: blur (edge width) and geometric outliers (local homography)."""
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 
@@ -64,6 +66,36 @@ def edge_width_px(gray: np.ndarray, target: Target, point_id: np.ndarray, uv: np
     return float(np.percentile(np.maximum(width, 0.0), 75))
 
 
+_INVERSE_ITERATIONS = 3
+
+
+@functools.lru_cache(maxsize=32)
+def _neighbourhoods(points_bytes: bytes, point_id_bytes: bytes, neighbours: int):
+    """The target side of local_homography_residual, the same in every frame that sees the same
+    points: each point's nearest neighbours on the target, their normalised coordinates, the
+    design's x-rows and whether the neighbourhood is well posed."""
+    points = np.frombuffer(points_bytes).reshape(-1, 3)
+    point_id = np.frombuffer(point_id_bytes, dtype=np.int64)
+    n = len(point_id)
+    xy = points[point_id, :2]
+    k = min(neighbours, n - 1)
+    dist = np.linalg.norm(xy[:, None] - xy[None], axis=2)
+    np.fill_diagonal(dist, np.inf)
+    nearest = np.argsort(dist, axis=1)[:, :k]                      # (n, k)
+    nx = xy[nearest]                                                # (n, k, 2)
+    # Hartley normalisation per neighbourhood
+    mx = nx.mean(1, keepdims=True)
+    sx = np.sqrt(((nx - mx) ** 2).sum(2).mean(1))[:, None, None] + 1e-300
+    x = (nx - mx) / sx
+    xh = np.concatenate([x, np.ones(x.shape[:2] + (1,))], axis=2)  # (n, k, 3)
+    spread = np.linalg.svd(x, compute_uv=False)                     # (n, 2)
+    well_posed = spread[:, 1] > 0.25 * spread[:, 0]
+    p = np.concatenate([(xy[:, None, :] - mx) / sx, np.ones((n, 1, 1))], axis=2)[:, 0, :]
+    for array in (nearest, xh, well_posed, p):
+        array.flags.writeable = False
+    return nearest, xh, well_posed, p
+
+
 def local_homography_residual(target: Target, point_id: np.ndarray, uv: np.ndarray, neighbours: int = 8) -> np.ndarray:
     """For each detected point, the distance from its pixel to the prediction of a homography
     fitted to its nearest detected neighbours on the target, in units of the local grid step
@@ -73,32 +105,33 @@ def local_homography_residual(target: Target, point_id: np.ndarray, uv: np.ndarr
     result = np.full(n, np.nan)
     if n < 6:
         return result
-    xy = target.points_m[point_id, :2]
-    k = min(neighbours, n - 1)
-    dist = np.linalg.norm(xy[:, None] - xy[None], axis=2)
-    np.fill_diagonal(dist, np.inf)
-    nearest = np.argsort(dist, axis=1)[:, :k]                      # (n, k)
-    nx, nu = xy[nearest], uv[nearest]                               # (n, k, 2)
-    # Hartley normalisation per neighbourhood
-    mx, mu = nx.mean(1, keepdims=True), nu.mean(1, keepdims=True)
-    sx = np.sqrt(((nx - mx) ** 2).sum(2).mean(1))[:, None, None] + 1e-300
+    nearest, xh, well_posed, p = _neighbourhoods(np.ascontiguousarray(target.points_m, dtype=np.float64).tobytes(),
+                                                 np.ascontiguousarray(point_id, dtype=np.int64).tobytes(), neighbours)
+    nu = uv[nearest]                                                # (n, k, 2)
+    mu = nu.mean(1, keepdims=True)
     su = np.sqrt(((nu - mu) ** 2).sum(2).mean(1))[:, None, None] + 1e-300
-    x, u = (nx - mx) / sx, (nu - mu) / su
-    ones, zeros = np.ones(x.shape[:2] + (1,)), np.zeros(x.shape[:2] + (3,))
-    xh = np.concatenate([x, ones], axis=2)                           # (n, k, 3)
+    u = (nu - mu) / su
+    zeros = np.zeros(xh.shape)
     row1 = np.concatenate([xh, zeros, -u[..., :1] * xh], axis=2)
     row2 = np.concatenate([zeros, xh, -u[..., 1:] * xh], axis=2)
     design = np.concatenate([row1, row2], axis=1)                     # (n, 2k, 9)
-    # the null vector of each design: the eigenvector of D^T D with the smallest eigenvalue (the
-    # last right singular vector of D, to ~1e-14 after the normalisation; batched 9x9 eigh is
-    # faster than the SVD of the 2k x 9 designs, and this runs on every detected frame)
-    _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", design, design))
-    h = vectors[:, :, 0].reshape(n, 3, 3)
-    spread = np.linalg.svd(x, compute_uv=False)                       # (n, 2)
-    well_posed = spread[:, 1] > 0.25 * spread[:, 0]
-    p = np.concatenate([(xy[:, None, :] - mx) / sx, np.ones((n, 1, 1))], axis=2)[:, 0, :]
-    q = np.einsum("nij,nj->ni", h, p)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # The null vector of each D^T D (the last right singular vector of D): inverse iteration from
+    # the homography with h33 = 1 (the normalisation centres both sides, so h33 is far from 0),
+    # batched 9x9 solves: several times cheaper than eigh, the same vector to rounding on real
+    # detections, and this runs on every detected frame.
+    normal = design.transpose(0, 2, 1) @ design                       # (n, 9, 9)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        try:
+            h = np.concatenate([np.linalg.solve(normal[:, :8, :8], -normal[:, :8, 8:9])[..., 0], np.ones((n, 1))],
+                               axis=1)
+            shift = 1e-12 * np.trace(normal, axis1=1, axis2=2)[:, None, None] * np.eye(9)
+            for _ in range(_INVERSE_ITERATIONS):
+                h = np.linalg.solve(normal + shift, h[..., None])[..., 0]
+                h /= np.linalg.norm(h, axis=1, keepdims=True)
+        except np.linalg.LinAlgError:  # a degenerate neighbourhood: the eigenvectors, one batch
+            h = np.linalg.eigh(normal)[1][:, :, 0]
+        h = h.reshape(n, 3, 3)
+        q = np.einsum("nij,nj->ni", h, p)
         predicted = q[:, :2] / q[:, 2:3] * su[:, 0] + mu[:, 0]
         step_px = np.linalg.norm(uv[nearest[:, 0]] - uv, axis=1)
         residual = np.linalg.norm(predicted - uv, axis=1) / step_px
