@@ -125,13 +125,15 @@ class Detector:
             return _empty("no_target")
         return self._checked(gray, *found)
 
-    def refine_checkerboard(self, image: np.ndarray, uv_guess: np.ndarray) -> FrameDetection:
+    def refine_checkerboard(self, image: np.ndarray, uv_guess: np.ndarray, numbered: bool = False) -> FrameDetection:
         """Checkerboards: the full grid of corners near uv_guess ((rows*cols, 2), row-major in any
         of the grid's numberings, e.g. a tracker's prediction) refined and checked exactly as a
-        full detection's coarse corners are (cornerSubPix, ids, outer ring, blur, geometry)."""
+        full detection's coarse corners are (cornerSubPix, ids, outer ring, blur, geometry).
+        numbered: uv_guess is already in the target's numbering (a track of canonical detections:
+        each corner stays near its prediction), so the ids are kept instead of derived again."""
         gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
         try:
-            point_id, uv = self._refine_checkerboard(gray, np.asarray(uv_guess, dtype=np.float64))
+            point_id, uv = self._refine_checkerboard(gray, np.asarray(uv_guess, dtype=np.float64), numbered)
         except _Rejected as rejected:
             return _empty(rejected.args[0])
         except cv2.error:
@@ -168,14 +170,15 @@ class Detector:
         uv = (corners.reshape(-1, 2).astype(np.float64) + 0.5) / scale - 0.5  # pixel centres
         return self._refine_checkerboard(gray, uv)
 
-    def _refine_checkerboard(self, gray: np.ndarray, uv: np.ndarray):
+    def _refine_checkerboard(self, gray: np.ndarray, uv: np.ndarray, numbered: bool = False):
         rows, cols = self.target.grid_shape
         # cornerSubPix with a window a quarter of the grid step: on OpenCV's left*.jpg it lowers
         # the calibration RMS from 0.26 px (SB alone) to 0.19 px; windows reaching half a square
         # (OpenCV's sample uses 11, i.e. 23 x 23 px) raise it to 0.41 px and bias f by +3 px.
         window = self.options.subpix_window_px or _grid_window(uv, rows, cols)
         uv = _corner_subpix(gray, uv, window)
-        uv = self._canonical(gray, uv)
+        if not numbered:
+            uv = self._canonical(gray, uv)
         if self.options.check_outer_ring and not _outer_ring_alternates(gray, uv, rows, cols):
             raise _Rejected("outer_ring")
         return np.arange(rows * cols), uv

@@ -111,7 +111,7 @@ class CheckerboardTracker:
             # a wide first pass pulls the prediction (a few px off) onto the corners; the
             # detector's own refinement then runs exactly as after a full detection
             coarse = _wide_subpix(gray, predicted, self.grid_shape)
-            found = self._refiner.refine_checkerboard(gray, coarse)
+            found = self._refiner.refine_checkerboard(gray, coarse, numbered=True)
             if found.accepted and self._verified(gray, predicted, found.uv):
                 self.counts["tracked"] += 1
                 self._remember(index, found.uv)
