@@ -24,6 +24,10 @@ def add_parser(sub) -> None:
     p.add_argument("--pixel-size-mm", type=number(1e-4, 1.0, " mm"), default=0.0112,
                    help="sensor pixel pitch in mm (the distortion radii are in mm; default 0.0112)")
     p.add_argument("--max-frames", type=FRAMES, default=None, help="stop after this many frames")
+    p.add_argument("--line-delay", type=number(0.0, 1e-3, " s/row"), default=0.0, metavar="S_PER_ROW",
+                   help="the camera's rolling-shutter line delay in s/row (e.g. `rscalib linedelay`'s "
+                        "line_delay_s): every measurement is moved to one time per frame (docs/sog.md §18); "
+                        "default 0: treated as a global shutter")
     p.add_argument("--f-range", type=FOCAL_PX, nargs=2, default=None, metavar=("LO", "HI"),
                    help="focal lengths in px the candidates start from (default: a wide range for the image size)")
     advanced = p.add_argument_group("advanced (baselines and tuning for experiments; the defaults are the method)")
@@ -87,7 +91,8 @@ def run(args: argparse.Namespace) -> int:
 
     result = self_calibrate(frames, video.image_size, restarts=not args.no_restarts, pixel_size_mm=args.pixel_size_mm, options=options,
                             grid=grid, front_end=FrontEndOptions(subpixel=args.subpixel), max_frames=args.max_frames,
-                            progress=not args.quiet, expected_frames=video.frame_count_estimate)
+                            progress=not args.quiet, expected_frames=video.frame_count_estimate,
+                            line_delay_s=args.line_delay)
     out = Path(args.out)
     written = write_selfcalib_outputs(
         result, out, extra={"bank": args.bank, "subpixel": args.subpixel, "timestamps_from": video.timestamps_from},
@@ -95,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
                 "bank": args.bank, "f_range": args.f_range, "f0": args.f0, "f_sigma": args.f_sigma,
                 "sprt_alpha": options.sprt_alpha, "sprt_beta": options.sprt_beta, "subpixel": args.subpixel,
                 "restarts": not args.no_restarts, "ransac_hypotheses": options.ransac_hypotheses,
-                "max_features": options.max_features})
+                "max_features": options.max_features, "line_delay_s": args.line_delay})
     m, b = result.mean, result.bounds_99
     print(f"f {m[0]:.2f} px [{b[0, 0]:.2f}, {b[0, 1]:.2f}], cx {m[1]:.2f}, cy {m[2]:.2f}, k1 {m[3]:.5f} mm^-2, "
           f"k2 {m[4]:.5f} mm^-4; {result.gaussians_left} of {result.gaussians_initial} Gaussians left after "

@@ -18,6 +18,7 @@ from ..io.video import open_source
 from .driver import SelfCalibHistory, run_bank
 from .front_end import FrontEndOptions, ImageFrontEnd
 from .prior import PAPER_PIXEL_SIZE_MM, initial_bank, make_bank, single_gaussian_grid
+from .rolling_shutter import RollingShutterCorrection, timed_frames
 
 __all__ = ["PARAM_NAMES", "GrayFrames", "Restart", "SelfCalibResult", "civera_to_opencv", "judge_determined",
            "read_gray_frames", "self_calibrate", "default_options", "RANSAC_HYPOTHESES", "RESTART_OFFSET", "DETERMINED_MAX_CONTRACTION",
@@ -255,11 +256,15 @@ def _frame_count(frames, max_frames: Optional[int], expected_frames: Optional[in
     return len(frames) if hasattr(frames, "__len__") else None
 
 
-def _run(frames, width: int, height: int, pixel_size_mm, options, front_end, initial, max_frames, on_frame
-         ) -> tuple[_core.SogBank, SelfCalibHistory, ImageFrontEnd]:
+def _run(frames, width: int, height: int, pixel_size_mm, options, front_end, initial, max_frames, on_frame,
+         line_delay_s: float = 0.0) -> tuple[_core.SogBank, SelfCalibHistory, ImageFrontEnd]:
     source = front_end if isinstance(front_end, ImageFrontEnd) else ImageFrontEnd(front_end, (width, height))
     bank = make_bank(width, height, pixel_size_mm, options=options, bank=initial)
-    history = run_bank(bank, _checked_gray(frames, width, height), source, min_visible=source.options.min_visible,
+    gray = _checked_gray(frames, width, height)
+    measured = source
+    if line_delay_s > 0:  # measurements moved to one time per frame (rolling_shutter.py)
+        measured, gray = RollingShutterCorrection(source, line_delay_s, height), timed_frames(gray)
+    history = run_bank(bank, gray, measured, min_visible=source.options.min_visible,
                        max_new_per_frame=source.options.max_new_per_frame, max_frames=max_frames,
                        on_frame=on_frame)
     return bank, history, source
@@ -271,7 +276,7 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
                    max_frames: Optional[int] = None, progress: ProgressArg = None,
                    expected_frames: Optional[int] = None,
                    on_frame: Optional[Callable[[int, _core.SogBank, _core.SogUpdateReport], None]] = None,
-                   restarts: bool = True) -> SelfCalibResult:
+                   restarts: bool = True, line_delay_s: float = 0.0) -> SelfCalibResult:
     """Run the SOG bank over `frames`: an iterable of (time_s, image), grayscale or BGR uint8, or a
     callable returning a fresh such iterable (then the frames are read again for the restarts);
     an image of None (unreadable) is skipped.
@@ -284,7 +289,11 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
     `expected_frames` the bar's total when `max_frames` is not given;
     on_frame(k, bank, report) is called after every processed frame of the bank's pass;
     restarts: check that the data determine the answer (judge_determined) when the frames can be
-    read again."""
+    read again;
+    line_delay_s: the sensor's line delay (s/row; e.g. from `rscalib linedelay`), > 0 to compensate
+    the rolling shutter in every measurement (rolling_shutter.RollingShutterCorrection), 0: none."""
+    if not (np.isfinite(line_delay_s) and line_delay_s >= 0):
+        raise InputError(f"the line delay must be 0 or a positive number of s/row, not {line_delay_s!r}")
     width, height = int(image_size[0]), int(image_size[1])
     options = default_options() if options is None else options
     first_frames, factory = _frame_factory(frames)
@@ -307,7 +316,7 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
                 on_frame(k, running, report)
 
         bank, history, source = _run(first_frames, width, height, pixel_size_mm, options, front_end, initial,
-                                     max_frames, each_frame)
+                                     max_frames, each_frame, line_delay_s)
         mean = np.asarray(bank.calibration_mean)
         runs = []
         if checking and bank.num_gaussians == 1:
@@ -321,7 +330,7 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
                     bar.update(offset + k + 1, f"restart from f {f0:.0f} px: {running.calibration_mean[0]:.1f}")
 
                 single, _, _ = _run(factory(), width, height, pixel_size_mm, options, fe_options, one, max_frames,
-                                    restart_frame)
+                                    restart_frame, line_delay_s)
                 runs.append(Restart(f0=f0, mean=np.asarray(single.calibration_mean),
                                     bounds_99=np.asarray(single.calibration_bounds_99())))
                 done += len(history)

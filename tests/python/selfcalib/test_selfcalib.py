@@ -108,18 +108,20 @@ def test_selfcalib_cli_recovers_the_focal_length(room_sequence, tmp_path):
 
 def test_selfcalib_single_ekf_option_runs_one_gaussian_from_f0(room_sequence, tmp_path):
     proc = subprocess.run([*CLI, "selfcalib", room_sequence, "--out", tmp_path / "one", "--quiet", "--bank", "single",
-                           "--f0", "260", "--f-sigma", "60", "--max-frames", "20"],
+                           "--f0", "260", "--f-sigma", "60", "--max-frames", "20", "--line-delay", "6e-5"],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode in (0, 3), proc.stderr     # 20 frames need not determine f (restarts judge it)
     result = json.loads((tmp_path / "one" / "result.json").read_text())
     assert result["bank"] == "single"
+    assert result["provenance"]["inputs"]["line_delay_s"] == 6e-5   # the rolling shutter was compensated
     assert result["gaussians_initial"] == 1 and result["gaussians_left"] == 1
     assert result["history"]["mean"][0][0] != pytest.approx(result["f"])  # it moved from f0 ...
     lo, hi = result["history"]["bounds_99"][0][0]
     assert lo < 260 - 2.5 * 60 and hi > 260 + 2.5 * 60                  # ... which started as 260 +- 60
 
 
-@pytest.mark.parametrize("case", ["missing source", "bad pixel size", "empty folder", "f0 without single"])
+@pytest.mark.parametrize("case", ["missing source", "bad pixel size", "empty folder", "f0 without single",
+                                  "negative line delay"])
 def test_selfcalib_bad_input_exits_2(tmp_path, case):
     source = tmp_path / "frames"
     source.mkdir()
@@ -132,6 +134,9 @@ def test_selfcalib_bad_input_exits_2(tmp_path, case):
     elif case == "f0 without single":
         cv2.imwrite(str(source / "a.png"), textured(2))
         extra = ["--f0", "200"]
+    elif case == "negative line delay":
+        cv2.imwrite(str(source / "a.png"), textured(2))
+        extra = ["--line-delay", "-3e-5"]
     proc = subprocess.run([*CLI, "selfcalib", source, "--out", tmp_path / "o", "--quiet", *extra],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2, (case, proc.stderr)
