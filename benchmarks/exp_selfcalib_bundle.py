@@ -154,12 +154,10 @@ def true_pixels(seq: Path, tracks) -> np.ndarray:
     return project_civera(params, np.einsum("nij,nj->ni", R, Xo) + p, pixel_mm)
 
 
-def audit(seq: Path, tracks, filter_mean: np.ndarray, pixel_mm: float, step: int) -> dict:
-    """How far the front end's pixels are from the true ones (by track age; the radial component,
-    outwards positive, from the true principal point), and the BA on the true pixels of the same
-    observations (noise-free, and with 0.2 px independent noise)."""
-    import dataclasses
-
+def track_errors(seq: Path, tracks) -> dict:
+    """How far the front end's pixels are from the true ones: RMS, share beyond 2 px, and by track
+    age (observations within 2 px): RMS and the radial component (outwards positive, from the true
+    principal point), as a mean and per pixel of radius."""
     truth = json.loads((seq / "truth.json").read_text())
     params = np.array(truth["camera"]["params"])
     uv_true = true_pixels(seq, tracks)
@@ -182,6 +180,17 @@ def audit(seq: Path, tracks, filter_mean: np.ndarray, pixel_mm: float, step: int
                 # radial error per px of radius: a zoom of the tracks against the truth
                 "radial_per_radius": float(np.sum(radial[sel] * np.linalg.norm(offset[sel], axis=1))
                                            / np.sum(np.linalg.norm(offset[sel], axis=1) ** 2))}
+    return out
+
+
+def audit(seq: Path, tracks, filter_mean: np.ndarray, pixel_mm: float, step: int, with_ba: bool = True) -> dict:
+    """:func:`track_errors`, and the BA on the true pixels of the same observations (noise-free,
+    and with 0.2 px independent noise) unless not ``with_ba``."""
+    import dataclasses
+
+    out = track_errors(seq, tracks)
+    uv_true = true_pixels(seq, tracks)
+    params = np.array(json.loads((seq / "truth.json").read_text())["camera"]["params"])
     rng = np.random.default_rng(7)
     truth_d = dict(zip(NAMES, params.tolist()))
     for name, uv in (("ba_true_pixels", uv_true), ("ba_true_pixels_0.2px", uv_true + rng.normal(0, 0.2, uv_true.shape))):
