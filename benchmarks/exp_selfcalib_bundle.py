@@ -16,6 +16,11 @@ repository: worktrees set the variable).
 Usage: PYTHONPATH=python .venv/bin/python benchmarks/exp_selfcalib_bundle.py [--parts abc]
            [--sizes 320x240,640x480] [--seeds 5] [--seed0 1100] [--frames 200] [--step 3]
            [--cache /tmp/rscalib_h11_selfcalib_realistic] [--out benchmarks/results/exp_selfcalib_bundle.json]
+           [--styles walk-forward,...] [--front-end default|tracked|tracked-h|...] [--audit | --audit-only]
+
+--front-end picks the image front end's options (FRONT_ENDS); --audit-only runs the filter and
+the audit of the tracks against the renderer's true pixels, without the bundle adjustment (a quick
+comparison of front ends: track error by age, its radial part, the front end's CPU ms per frame).
 """
 from __future__ import annotations
 
@@ -44,6 +49,49 @@ SHARED_DATA = Path(os.environ.get("RSCALIB_SHARED_DATA", REPO.parent / "shared" 
 DESK = SHARED_DATA / "real_selfcalib_s3phone" / "escritorio_traslacion.mp4"
 DESK_TRUTH = {"f": 524.65, "cx": 308.6, "cy": 236.5}
 DESK_PIXEL_SIZE_MM = 0.0070216
+
+
+# --front-end: FrontEndOptions of the image front end (sizes for 320 px, scaled with the width)
+FRONT_ENDS = {
+    "default": {},
+    "parabola": {"subpixel": "parabola"},
+    "tracked": {"subpixel": "tracked"},
+    "tracked-h": {"subpixel": "tracked", "warp_model": "homography"},
+    "tracked-h8": {"subpixel": "tracked", "warp_model": "homography", "refine_half_px": 8},
+    "tracked-8": {"subpixel": "tracked", "refine_half_px": 8},
+}
+
+
+class TimedSource:
+    """A measurement source that adds up the CPU time of ``source``'s calls (the front end's cost)."""
+
+    def __init__(self, source) -> None:
+        self.source = source
+        self.cpu_s = 0.0
+        self.calls = 0
+
+    @property
+    def options(self):
+        return self.source.options
+
+    def _timed(self, name: str, *args):
+        started = time.process_time()
+        out = getattr(self.source, name)(*args)
+        self.cpu_s += time.process_time() - started
+        return out
+
+    def measure(self, frame, ids, uv_pred, cov):
+        self.calls += 1
+        return self._timed("measure", frame, ids, uv_pred, cov)
+
+    def forget(self, feature_ids) -> None:
+        self.source.forget(feature_ids)
+
+    def new_features(self, frame, count, search):
+        return self._timed("new_features", frame, count, search)
+
+    def track(self, frame, feature_ids, uv) -> None:
+        self._timed("track", frame, feature_ids, uv)
 
 
 def filter_and_tracks(frames, source, size: tuple[int, int], pixel_mm: float) -> tuple[np.ndarray, object, float]:
@@ -110,16 +158,34 @@ def part_a(args) -> list[dict]:
 
 
 def image_run(label: dict, source_path: Path, truth: dict, pixel_mm: float, step: int, audited: bool = False,
-              max_track_frames: Optional[int] = None) -> dict:
+              max_track_frames: Optional[int] = None, front_end: str = "default", audit_only: bool = False) -> dict:
+    """The bank with the image front end ``front_end`` (a FRONT_ENDS name), the BA (unless
+    ``audit_only``) and the audit of its tracks (``audited`` or ``audit_only``)."""
     gray = read_gray_frames(source_path)
-    front_end = ImageFrontEnd(FrontEndOptions(), gray.image_size)
-    mean, tracks, filter_s = filter_and_tracks(gray.frames, front_end, gray.image_size, pixel_mm)
-    row = compare(dict(label, size=f"{gray.image_size[0]}x{gray.image_size[1]}"), truth, mean, tracks,
-                  gray.image_size, pixel_mm, step, filter_s, max_track_frames)
+    source = TimedSource(ImageFrontEnd(FrontEndOptions(**FRONT_ENDS[front_end]), gray.image_size))
+    mean, tracks, filter_s = filter_and_tracks(gray.frames, source, gray.image_size, pixel_mm)
+    label = dict(label, size=f"{gray.image_size[0]}x{gray.image_size[1]}", front_end=front_end,
+                 front_end_ms_per_frame=round(1e3 * source.cpu_s / max(source.calls, 1), 2))
+    if audit_only:
+        row = dict(label, truth=truth, filter=dict(zip(NAMES, mean.tolist())), filter_s=round(filter_s, 2),
+                   filter_f_error_pct=100 * (mean[0] / truth["f"] - 1), observations_recorded=len(tracks))
+        row["audit"] = track_errors(source_path, tracks)
+        print_audit(row)
+        return row
+    row = compare(label, truth, mean, tracks, gray.image_size, pixel_mm, step, filter_s, max_track_frames)
     print_row(row)
     if audited:
         row["audit"] = audit(source_path, tracks, mean, pixel_mm, step)
     return row
+
+
+def print_audit(row: dict) -> None:
+    a = row["audit"]
+    print(f"{row['front_end']:10s} {row['style']:15s} {row['size']} {row['seed']}: filter f {row['filter_f_error_pct']:+.1f} %"
+          f", track error rms {a['rms_px']:.2f} px, >2 px {100 * a['beyond_2px']:.1f} %, by age "
+          + ", ".join(f"{k}: {v['rms_px']:.2f} px radial {v['radial_per_radius']:+.1e}/px (n {v['n']})"
+                      for k, v in a["by_age"].items())
+          + f"; front end {row['front_end_ms_per_frame']:.1f} ms/frame", flush=True)
 
 
 def true_pixels(seq: Path, tracks) -> np.ndarray:
@@ -214,7 +280,7 @@ def audit(seq: Path, tracks, filter_mean: np.ndarray, pixel_mm: float, step: int
 def part_b(args) -> list[dict]:
     rows = []
     for size in args.sizes.split(","):
-        for style in STYLES:
+        for style in args.styles.split(","):
             for seed in range(args.seed0, args.seed0 + args.seeds):
                 seq = Path(args.cache) / f"{style}_{size}_s{seed}_n{args.frames}"
                 if not (seq / "truth.json").exists():
@@ -223,13 +289,14 @@ def part_b(args) -> list[dict]:
                 camera = json.loads((seq / "truth.json").read_text())["camera"]
                 truth = dict(zip(NAMES, camera["params"]))
                 rows.append(image_run({"part": "b", "style": style, "seed": seed}, seq, truth,
-                                      float(camera["pixel_size_mm"][0]), args.step, args.audit, args.max_track_frames))
+                                      float(camera["pixel_size_mm"][0]), args.step, args.audit, args.max_track_frames,
+                                      args.front_end, args.audit_only))
     return rows
 
 
 def part_c(args) -> list[dict]:
     return [image_run({"part": "c", "style": "desk video", "seed": None}, DESK, DESK_TRUTH, DESK_PIXEL_SIZE_MM,
-                      args.step, max_track_frames=args.max_track_frames)]
+                      args.step, max_track_frames=args.max_track_frames, front_end=args.front_end)]
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -288,6 +355,11 @@ def main() -> None:
     ap.add_argument("--audit", action="store_true",
                     help="part b: also compare the tracks with the true pixels and run the BA on those")
     ap.add_argument("--table", nargs="*", metavar="JSON", help="only print the table of these result files")
+    ap.add_argument("--styles", default=",".join(STYLES), help="part b: these motion styles")
+    ap.add_argument("--front-end", default="default", choices=sorted(FRONT_ENDS),
+                    help="parts b, c: the image front end's options (FRONT_ENDS)")
+    ap.add_argument("--audit-only", action="store_true",
+                    help="part b: only the filter and the track errors of --audit (no bundle adjustment)")
     args = ap.parse_args()
     if args.table is not None:
         print(table([r for path in args.table for r in json.loads(Path(path).read_text())["runs"]]))
@@ -296,6 +368,13 @@ def main() -> None:
     rows: list[dict] = []
     for part, run in (("a", part_a), ("b", part_b), ("c", part_c)):
         if part in args.parts:
+            if part == "b" and args.audit_only:
+                rows += run(args)
+                Path(args.out).write_text(json.dumps({"experiment": "exp_selfcalib_bundle (front-end audit)",
+                                                      "args": vars(args), "machine": machine_info(),
+                                                      "command": " ".join(sys.argv), "runs": rows}, indent=1,
+                                                     default=float))
+                continue
             rows += run(args)
             doc = {"experiment": "exp_selfcalib_bundle", "args": vars(args), "machine": machine_info(),
                    "command": " ".join(sys.argv), "total_wall_s": round(time.perf_counter() - started, 1),
