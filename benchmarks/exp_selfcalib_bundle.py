@@ -59,6 +59,7 @@ FRONT_ENDS = {
     "tracked-h": {"subpixel": "tracked", "warp_model": "homography"},
     "tracked-h8": {"subpixel": "tracked", "warp_model": "homography", "refine_half_px": 8},
     "tracked-8": {"subpixel": "tracked", "refine_half_px": 8},
+    "klt": {"subpixel": "klt"},
 }
 
 

@@ -6,7 +6,7 @@ docs/sog.md §1). :class:`ImageFrontEnd` is the measurement source of
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Optional
 
 import cv2
@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from .driver import FrameSearch
 
 CHI2_2DOF_99 = 9.210340371976184
-SUBPIXEL_MODES = ("affine", "parabola", "tracked")
+SUBPIXEL_MODES = ("affine", "parabola", "tracked", "klt")
 
 
 @dataclass
@@ -46,6 +46,11 @@ class FrontEndOptions:
     max_warp_scale: float = 4.0       # "tracked": the warp's singular values within [1/this, this]
     warp_model: str = "affine"        # "tracked": "affine" or "homography" (perspective across the patch)
     min_ecc_correlation: float = 0.0  # "tracked": ECC's correlation of the aligned template, at least
+    # "klt": pyramidal Lucas-Kanade from the previous frame, started at the prediction, kept when the
+    # backward track returns within klt_max_fb_px, inside the 99 % ellipse and the original patch's
+    # NCC there is ncc_threshold; the other features are searched as "affine" does (re-anchored)
+    klt_max_fb_px: float = 0.5
+    klt_levels: int = 3
 
     def scaled(self, width: int) -> FrontEndOptions:
         """These options for images ``width`` pixels wide (the sizes above are for 320 px)."""
@@ -273,13 +278,54 @@ class ImageFrontEnd:
             if self.options.subpixel == "tracked" else None
         self.store = PatchStore(self.options.patch_half_px, reference_half)
 
+        self._last_frame: Optional[np.ndarray] = None     # "klt": the previous frame and its matches
+        self._last_uv: dict[int, np.ndarray] = {}
+
     def measure(self, frame: np.ndarray, ids: np.ndarray, uv_pred: np.ndarray,
                 cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return active_search(frame, self.store.patches, ids, uv_pred, cov, self.options)
+        if self.options.subpixel != "klt":
+            return active_search(frame, self.store.patches, ids, uv_pred, cov, self.options)
+        uv, found = self._klt(frame, ids, uv_pred, cov)
+        rest = ~found
+        if rest.any():
+            uv[rest], found[rest] = active_search(frame, self.store.patches, ids[rest], uv_pred[rest], cov[rest],
+                                                  replace(self.options, subpixel="affine"))
+        self._last_frame = frame
+        self._last_uv = {int(fid): p for fid, p, ok in zip(ids, uv, found) if ok}
+        return uv, found
+
+    def _klt(self, frame: np.ndarray, ids: np.ndarray, uv_pred: np.ndarray, cov: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+        uv = np.full((len(ids), 2), np.nan)
+        found = np.zeros(len(ids), dtype=bool)
+        have = [i for i, fid in enumerate(ids) if int(fid) in self._last_uv and np.all(np.isfinite(cov[i]))]
+        if self._last_frame is None or not have:
+            return uv, found
+        size = 2 * self.options.patch_half_px + 1
+        lk = dict(winSize=(size, size), maxLevel=self.options.klt_levels, flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
+                  criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+        start = np.array([self._last_uv[int(ids[i])] for i in have], np.float32).reshape(-1, 1, 2)
+        ahead, ok, _ = cv2.calcOpticalFlowPyrLK(self._last_frame, frame, start,
+                                                uv_pred[have].astype(np.float32).reshape(-1, 1, 2), **lk)
+        back, ok_back, _ = cv2.calcOpticalFlowPyrLK(frame, self._last_frame, ahead, start.copy(), **lk)
+        round_trip = np.linalg.norm((back - start).reshape(-1, 2), axis=1)
+        for j, i in enumerate(have):
+            p = ahead[j, 0].astype(np.float64)
+            d = p - uv_pred[i]
+            if not (ok[j, 0] and ok_back[j, 0] and round_trip[j] <= self.options.klt_max_fb_px
+                    and d @ np.linalg.solve(cov[i] + 1e-9 * np.eye(2), d) <= CHI2_2DOF_99):
+                continue
+            patch = self.store.patches[int(ids[i])]
+            seen = cv2.getRectSubPix(frame, patch.shape[::-1], (float(p[0]), float(p[1])), patchType=cv2.CV_32F)
+            if float(cv2.matchTemplate(seen, patch.astype(np.float32), cv2.TM_CCOEFF_NORMED)[0, 0]) \
+                    >= self.options.ncc_threshold:    # the original patch is still there: no slow drift
+                uv[i], found[i] = p, True
+        return uv, found
 
     def forget(self, feature_ids: np.ndarray) -> None:
         for fid in feature_ids:
             self.store.patches.pop(int(fid), None)
+            self._last_uv.pop(int(fid), None)
 
     def new_features(self, frame: np.ndarray, count: int, search: FrameSearch) -> np.ndarray:
         """Corners away from the predicted and the matched pixels of ``search``, where a patch can be cut."""
@@ -293,3 +339,5 @@ class ImageFrontEnd:
     def track(self, frame: np.ndarray, feature_ids: np.ndarray, uv: np.ndarray) -> None:
         for fid, p in zip(feature_ids, uv):
             self.store.add(frame, int(fid), p)
+            self._last_uv[int(fid)] = np.asarray(p, np.float64)
+        self._last_frame = frame
