@@ -300,44 +300,72 @@ def part_c(args) -> list[dict]:
                       args.step, max_track_frames=args.max_track_frames, front_end=args.front_end)]
 
 
+def _groups(rows: list[dict], by_style: bool = True) -> dict:
+    """Rows with a BA result by (part, front end, style, size); style "all" unless ``by_style``."""
+    out: dict = {}
+    for r in rows:
+        if "f" in r.get("ba", {}):
+            key = (r["part"], r.get("front_end", "default"), r.get("style") if by_style else "all", r.get("size"))
+            out.setdefault(key, []).append(r)
+    return dict(sorted(out.items(), key=lambda item: str(item[0])))
+
+
+def _summary_of(group: list[dict]) -> dict:
+    inside = {n: sum(r["ba"]["inside"].get(n, False) for r in group) for n in NAMES if n in group[0]["ba"]["inside"]}
+    return {
+        "runs": len(group),
+        "filter_f_error_pct": [round(r["filter_f_error_pct"], 2) for r in group],
+        "ba_f_error_pct": [round(r["ba"]["f_error_pct"], 2) for r in group],
+        "ba_f_within_2pct": sum(abs(r["ba"]["f_error_pct"]) <= 2 for r in group),
+        "ba_inside_99": inside,
+        "ba_inside_all": sum(all(r["ba"]["inside"].values()) for r in group),
+        "ba_inside_99_tracks": {n: sum(r["ba"]["inside_tracks"].get(n, False) for r in group) for n in inside},
+        "ba_inside_all_tracks": sum(all(r["ba"]["inside_tracks"].values()) for r in group),
+        "ba_generic_f_error_pct": [round(r["ba_generic"].get("f_error_pct", np.nan), 2) for r in group],
+        "ba_generic_same": sum(abs(r["ba_generic"].get("f", np.inf) / r["ba"]["f"] - 1) <= 0.005 for r in group),
+        "ba_median_s": float(np.median([r["ba"]["elapsed_s"] for r in group])),
+        "filter_median_s": float(np.median([r["filter_s"] for r in group])),
+    }
+
+
 def summarise(rows: list[dict]) -> dict:
-    out = {}
-    for key in sorted({(r["part"], r.get("style"), r.get("size")) for r in rows}, key=str):
-        group = [r for r in rows if (r["part"], r.get("style"), r.get("size")) == key and "f" in r.get("ba", {})]
-        if not group:
-            continue
-        inside = {n: sum(r["ba"]["inside"].get(n, False) for r in group) for n in NAMES if n in group[0]["ba"]["inside"]}
-        out[" ".join(str(k) for k in key)] = {
-            "runs": len(group),
-            "filter_f_error_pct": [round(r["filter_f_error_pct"], 2) for r in group],
-            "ba_f_error_pct": [round(r["ba"]["f_error_pct"], 2) for r in group],
-            "ba_f_within_2pct": sum(abs(r["ba"]["f_error_pct"]) <= 2 for r in group),
-            "ba_inside_99": inside,
-            "ba_inside_all": sum(all(r["ba"]["inside"].values()) for r in group),
-            "ba_inside_99_tracks": {n: sum(r["ba"]["inside_tracks"].get(n, False) for r in group) for n in inside},
-            "ba_inside_all_tracks": sum(all(r["ba"]["inside_tracks"].values()) for r in group),
-            "ba_generic_f_error_pct": [round(r["ba_generic"].get("f_error_pct", np.nan), 2) for r in group],
-            "ba_median_s": float(np.median([r["ba"]["elapsed_s"] for r in group])),
-            "filter_median_s": float(np.median([r["filter_s"] for r in group])),
-        }
-    return out
+    return {" ".join(str(k) for k in key): _summary_of(group)
+            for grouping in (True, False) for key, group in _groups(rows, grouping).items()}
 
 
 def table(rows: list[dict]) -> str:
-    """Markdown: one line per part/style/size."""
-    lines = ["| part | style | size | runs | filter median abs f err % | BA median (max) abs f err % | BA f within 2 % "
-             "| BA truth in 99 % f/cx/cy/k1/k2 (model) | (by track) | generic start lands within 0.5 % of BA "
-             "| BA median s |", "|" + " --- |" * 11]
-    for key, g in summarise(rows).items():
-        part, style, size = key.split(" ", 1)[0], *key.split(" ", 1)[1].rsplit(" ", 1)
-        group = [r for r in rows if r["part"] == part and r.get("style") == style and r.get("size") == size
-                 and "f" in r.get("ba", {})]
-        same = sum(abs(r["ba_generic"].get("f", np.inf) / r["ba"]["f"] - 1) <= 0.005 for r in group)
-        inside = "/".join(str(v) for v in g["ba_inside_99"].values())
-        inside_t = "/".join(str(v) for v in g["ba_inside_99_tracks"].values())
-        lines.append(f"| {part} | {style} | {size} | {g['runs']} | {np.median(np.abs(g['filter_f_error_pct'])):.1f} "
-                     f"| {np.median(np.abs(g['ba_f_error_pct'])):.2f} ({np.max(np.abs(g['ba_f_error_pct'])):.2f}) "
-                     f"| {g['ba_f_within_2pct']} | {inside} | {inside_t} | {same} | {g['ba_median_s']:.1f} |")
+    """Markdown: one line per part/front end/style/size, then per part/front end/size."""
+    lines = ["| part | front end | style | size | runs | filter median abs f err % | BA median (max) abs f err % "
+             "| BA f within 2 % | BA truth in 99 % f/cx/cy/k1/k2 (model) | (by track) "
+             "| generic start lands within 0.5 % of BA | BA median s |", "|" + " --- |" * 12]
+    for grouping in (True, False):
+        for (part, front_end, style, size), group in _groups(rows, grouping).items():
+            g = _summary_of(group)
+            inside = "/".join(str(v) for v in g["ba_inside_99"].values())
+            inside_t = "/".join(str(v) for v in g["ba_inside_99_tracks"].values())
+            lines.append(f"| {part} | {front_end} | {style} | {size} | {g['runs']} "
+                         f"| {np.median(np.abs(g['filter_f_error_pct'])):.1f} "
+                         f"| {np.median(np.abs(g['ba_f_error_pct'])):.2f} ({np.max(np.abs(g['ba_f_error_pct'])):.2f}) "
+                         f"| {g['ba_f_within_2pct']} | {inside} | {inside_t} | {g['ba_generic_same']} "
+                         f"| {g['ba_median_s']:.1f} |")
+    return "\n".join(lines)
+
+
+def audit_table(rows: list[dict]) -> str:
+    """Markdown: the audit of the tracks per front end and size (medians over the runs)."""
+    bands = ("1-5", "5-15", "15-40", "40-1000000")
+    lines = ["| front end | size | runs | track error RMS px by age 1-5 / 5-15 / 15-40 / 40+ (median; max at 40+) "
+             "| abs radial per px of radius at 40+ (median; max) | > 2 px | front end CPU ms/frame |", "|" + " --- |" * 7]
+    for key in sorted({(r.get("front_end", "default"), r.get("size")) for r in rows if "audit" in r}, key=str):
+        group = [r for r in rows if "audit" in r and (r.get("front_end", "default"), r.get("size")) == key]
+        by_age = [[r["audit"]["by_age"][b] for r in group if b in r["audit"]["by_age"]] for b in bands]
+        radial = [abs(a["radial_per_radius"]) for a in by_age[-1]]
+        cost = [r["front_end_ms_per_frame"] for r in group if "front_end_ms_per_frame" in r]
+        lines.append(f"| {key[0]} | {key[1]} | {len(group)} | "
+                     + " / ".join(f"{np.median([a['rms_px'] for a in band]):.2f}" for band in by_age)
+                     + f" ({max(a['rms_px'] for a in by_age[-1]):.2f}) | {np.median(radial):.1e} ({max(radial):.1e}) "
+                     f"| {100 * np.mean([r['audit']['beyond_2px'] for r in group]):.2f} % "
+                     f"| {np.median(cost) if cost else float('nan'):.1f} |")
     return "\n".join(lines)
 
 
@@ -363,7 +391,10 @@ def main() -> None:
                     help="part b: only the filter and the track errors of --audit (no bundle adjustment)")
     args = ap.parse_args()
     if args.table is not None:
-        print(table([r for path in args.table for r in json.loads(Path(path).read_text())["runs"]]))
+        rows = [r for path in args.table for r in json.loads(Path(path).read_text())["runs"]]
+        print(table(rows))
+        if any("audit" in r for r in rows):
+            print("\n" + audit_table(rows))
         return
     started = time.perf_counter()
     rows: list[dict] = []
