@@ -45,7 +45,6 @@ class FrontEndOptions:
     max_warp_change: float = 1.25     # "tracked": per-frame change of the warp's singular values
     max_warp_scale: float = 4.0       # "tracked": the warp's singular values within [1/this, this]
     warp_model: str = "affine"        # "tracked": "affine" or "homography" (perspective across the patch)
-    min_ecc_correlation: float = 0.0  # "tracked": ECC's correlation of the aligned template, at least
     # "klt": pyramidal Lucas-Kanade from the previous frame, started at the prediction, kept when the
     # backward track returns within klt_max_fb_px, inside the 99 % ellipse and the original patch's
     # NCC there is ncc_threshold; the other features are searched as "affine" does (re-anchored)
@@ -101,7 +100,7 @@ class WarpedTemplate:
         homography = options.warp_model == "homography"
         start = _shift(u - x0, v - y0) @ self.warp @ _shift(-rh, -rh)   # template pixels -> region pixels
         try:
-            correlation, found = cv2.findTransformECC(
+            _, found = cv2.findTransformECC(
                 template, region, (start if homography else start[:2]).astype(np.float32),
                 cv2.MOTION_HOMOGRAPHY if homography else cv2.MOTION_AFFINE,
                 (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-4), None, 1)
@@ -121,8 +120,7 @@ class WarpedTemplate:
                 or change[0] > options.max_warp_change or change[1] < 1 / options.max_warp_change
                 or np.linalg.norm(warp[2, :2]) * rh > 0.25):    # the template's far side would fold
             return None
-        if math.hypot(centre_u - u, centre_v - v) > options.max_refine_shift_px \
-                or correlation < options.min_ecc_correlation:
+        if math.hypot(centre_u - u, centre_v - v) > options.max_refine_shift_px:
             return None
         self.warp = warp
         return float(centre_u), float(centre_v)
