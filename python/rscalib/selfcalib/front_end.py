@@ -1,7 +1,8 @@
 """The image front end of self-calibration: corners where the map is thin, patches stored at
 initialisation, and active search by normalised cross-correlation inside each feature's 99 %
 prediction ellipse, refined to sub-pixel by ECC affine alignment (docs/formulation.md §13,
-docs/sog.md §1). :class:`ImageFrontEnd` is the measurement source of
+docs/sog.md §1); FrontEndOptions.subpixel "tracked" also keeps each feature's warp between frames
+(no drift as the view magnifies), "klt" tracks frame to frame (a comparison: it drifts). :class:`ImageFrontEnd` is the measurement source of
 :func:`rscalib.selfcalib.driver.run_bank` for images."""
 from __future__ import annotations
 
@@ -35,9 +36,9 @@ class FrontEndOptions:
     # "affine": refine each NCC peak by ECC alignment of the patch under an affine warp (the stored
     # patch is never re-cut, so scale/rotation changes as the camera moves would otherwise bias the
     # match); "parabola": parabola through the NCC peak only; "tracked": each feature keeps the
-    # affine warp of its last match, NCC searches with the original patch warped by it, ECC starts
-    # from it, and a match ECC cannot refine is dropped (no parabola fallback): the reference is
-    # always the first view, so errors do not accumulate, and walking towards a wall (scale > 1.7)
+    # warp (warp_model) of its last match, NCC searches with the original patch warped by it, ECC
+    # starts from it, and a match ECC cannot refine is dropped (no parabola fallback): the reference
+    # is always the first view, so errors do not accumulate, and walking towards a wall (scale > 1.7)
     # no longer falls back to an unwarped patch (docs/sog.md §17: the drift of "affine").
     subpixel: str = "affine"
     max_refine_shift_px: float = 1.5
@@ -47,7 +48,8 @@ class FrontEndOptions:
     warp_model: str = "affine"        # "tracked": "affine" or "homography" (perspective across the patch)
     # "klt": pyramidal Lucas-Kanade from the previous frame, started at the prediction, kept when the
     # backward track returns within klt_max_fb_px, inside the 99 % ellipse and the original patch's
-    # NCC there is ncc_threshold; the other features are searched as "affine" does (re-anchored)
+    # NCC there is at least ncc_threshold; the others are searched as "affine" does (re-anchored).
+    # Measured: it drifts (a chain of frame-to-frame matches), "tracked" does not.
     klt_max_fb_px: float = 0.5
     klt_levels: int = 3
 
@@ -270,6 +272,8 @@ class ImageFrontEnd:
         options = options or FrontEndOptions()
         if options.subpixel not in SUBPIXEL_MODES:
             raise InputError(f"front_end.subpixel must be one of {', '.join(SUBPIXEL_MODES)}, not {options.subpixel!r}")
+        if options.warp_model not in ("affine", "homography"):
+            raise InputError(f"front_end.warp_model must be 'affine' or 'homography', not {options.warp_model!r}")
         self.options = options.scaled(int(image_size[0]))
         # "tracked": the reference covers the search patch down to half scale (moving away)
         reference_half = 2 * max(self.options.patch_half_px, self.options.refine_half_px) + 1 \
