@@ -2,8 +2,9 @@
 initialisation, and active search by normalised cross-correlation inside each feature's 99 %
 prediction ellipse, refined to sub-pixel by ECC affine alignment (docs/formulation.md §13,
 docs/sog.md §1); FrontEndOptions.subpixel "tracked" also keeps each feature's warp between frames
-(no drift as the view magnifies), "klt" tracks frame to frame (a comparison: it drifts). :class:`ImageFrontEnd` is the measurement source of
-:func:`rscalib.selfcalib.driver.run_bank` for images."""
+(no drift as the view magnifies), "klt" tracks frame to frame (a comparison: it drifts).
+:class:`ImageFrontEnd` is the measurement source of :func:`rscalib.selfcalib.driver.run_bank` for
+images."""
 from __future__ import annotations
 
 import math
