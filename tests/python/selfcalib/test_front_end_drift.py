@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
+from rscalib.errors import InputError
 from rscalib.selfcalib.front_end import FrontEndOptions, ImageFrontEnd, new_corners
 
 WIDTH, HEIGHT = 320, 240
@@ -87,3 +88,10 @@ def test_tracked_front_end_does_not_drift_while_the_default_does(warp_model):
     # the default (the patch unwarped for NCC, ECC from the identity, parabola fallback) drifts
     assert np.nanmean(default_rms[-10:]) > 3 * np.mean(tracked_rms[-10:])
     assert np.nanmean(default_rms[-10:]) > 2 * np.nanmean(default_rms[:10])
+
+
+def test_unknown_front_end_modes_are_input_errors():
+    with pytest.raises(InputError, match="subpixel"):
+        ImageFrontEnd(FrontEndOptions(subpixel="tracking"), (WIDTH, HEIGHT))
+    with pytest.raises(InputError, match="warp_model"):
+        ImageFrontEnd(FrontEndOptions(subpixel="tracked", warp_model="projective"), (WIDTH, HEIGHT))
