@@ -1,11 +1,11 @@
 """CPU cost per frame of the self-calibration loop with each image front end (issue 11): the desk
-video (640x480) through the SOG bank as `rscalib selfcalib` runs it (default_options(), no
+video (640x480; or --source) through the SOG bank as `rscalib selfcalib` runs it (default_options(), no
 restarts); per frame the CPU time of the whole loop (decoding included) and of the front end's
 calls, over the frames after the bank holds one Gaussian.
 
 Usage: RSCALIB_SHARED_DATA=../shared/data PYTHONPATH=python .venv/bin/python
            benchmarks/exp_selfcalib_frontend_speed.py [--front-ends default,tracked,tracked-h]
-           [--out benchmarks/results/exp_selfcalib_frontend_speed.json]
+           [--source VIDEO_OR_FOLDER] [--out benchmarks/results/exp_selfcalib_frontend_speed.json]
 """
 from __future__ import annotations
 
@@ -30,8 +30,8 @@ from rscalib.selfcalib.prior import make_bank  # noqa: E402
 REPO = Path(__file__).resolve().parents[1]
 
 
-def one(front_end: str) -> dict:
-    gray = read_gray_frames(DESK)
+def one(front_end: str, source_path: Path = DESK) -> dict:
+    gray = read_gray_frames(source_path)
     source = TimedSource(ImageFrontEnd(FrontEndOptions(**FRONT_ENDS[front_end]), gray.image_size))
     bank = make_bank(gray.image_size[0], gray.image_size[1], DESK_PIXEL_SIZE_MM, options=default_options())
     loop_cpu, front_cpu, gaussians = [], [], []
@@ -49,7 +49,7 @@ def one(front_end: str) -> dict:
     single = np.flatnonzero(np.asarray(gaussians) == 1)
     after = slice(int(single[0]) + 1 if len(single) else len(gaussians), None)
     loop_ms, front_ms = 1e3 * np.asarray(loop_cpu[after]), 1e3 * np.asarray(front_cpu[after])
-    row = {"front_end": front_end, "frames": len(loop_cpu), "collapse_frame": int(single[0]) if len(single) else None,
+    row = {"front_end": front_end, "source": str(source_path), "frames": len(loop_cpu), "collapse_frame": int(single[0]) if len(single) else None,
            "frames_after_collapse": len(loop_ms),
            "loop_cpu_ms_per_frame_median": float(np.median(loop_ms)) if len(loop_ms) else None,
            "frames_per_cpu_s": float(1e3 / np.mean(loop_ms)) if len(loop_ms) else None,
@@ -63,9 +63,10 @@ def one(front_end: str) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--front-ends", default="default,tracked,tracked-h")
+    ap.add_argument("--source", default=str(DESK), help="a video or image folder (default: the desk video)")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "exp_selfcalib_frontend_speed.json"))
     args = ap.parse_args()
-    rows = [one(name) for name in args.front_ends.split(",")]
+    rows = [one(name, Path(args.source)) for name in args.front_ends.split(",")]
     Path(args.out).write_text(json.dumps({"experiment": "exp_selfcalib_frontend_speed", "command": " ".join(sys.argv),
                                           "machine": machine_info(), "load_average_at_end": os.getloadavg(),
                                           "runs": rows}, indent=1))
