@@ -16,6 +16,11 @@ repository: worktrees set the variable).
 Usage: PYTHONPATH=python .venv/bin/python benchmarks/exp_selfcalib_bundle.py [--parts abc]
            [--sizes 320x240,640x480] [--seeds 5] [--seed0 1100] [--frames 200] [--step 3]
            [--cache /tmp/rscalib_h11_selfcalib_realistic] [--out benchmarks/results/exp_selfcalib_bundle.json]
+           [--styles walk-forward,...] [--front-end default|tracked|tracked-h|...] [--audit | --audit-only]
+
+--front-end picks the image front end's options (FRONT_ENDS); --audit-only runs the filter and
+the audit of the tracks against the renderer's true pixels, without the bundle adjustment (a quick
+comparison of front ends: track error by age, its radial part, the front end's CPU ms per frame).
 """
 from __future__ import annotations
 
@@ -44,6 +49,50 @@ SHARED_DATA = Path(os.environ.get("RSCALIB_SHARED_DATA", REPO.parent / "shared" 
 DESK = SHARED_DATA / "real_selfcalib_s3phone" / "escritorio_traslacion.mp4"
 DESK_TRUTH = {"f": 524.65, "cx": 308.6, "cy": 236.5}
 DESK_PIXEL_SIZE_MM = 0.0070216
+
+
+# --front-end: FrontEndOptions of the image front end (sizes for 320 px, scaled with the width)
+FRONT_ENDS = {
+    "default": {},
+    "parabola": {"subpixel": "parabola"},
+    "tracked": {"subpixel": "tracked"},
+    "tracked-h": {"subpixel": "tracked", "warp_model": "homography"},
+    "tracked-h8": {"subpixel": "tracked", "warp_model": "homography", "refine_half_px": 8},
+    "tracked-8": {"subpixel": "tracked", "refine_half_px": 8},
+    "klt": {"subpixel": "klt"},
+}
+
+
+class TimedSource:
+    """A measurement source that adds up the CPU time of ``source``'s calls (the front end's cost)."""
+
+    def __init__(self, source) -> None:
+        self.source = source
+        self.cpu_s = 0.0
+        self.calls = 0
+
+    @property
+    def options(self):
+        return self.source.options
+
+    def _timed(self, name: str, *args):
+        started = time.process_time()
+        out = getattr(self.source, name)(*args)
+        self.cpu_s += time.process_time() - started
+        return out
+
+    def measure(self, frame, ids, uv_pred, cov):
+        self.calls += 1
+        return self._timed("measure", frame, ids, uv_pred, cov)
+
+    def forget(self, feature_ids) -> None:
+        self.source.forget(feature_ids)
+
+    def new_features(self, frame, count, search):
+        return self._timed("new_features", frame, count, search)
+
+    def track(self, frame, feature_ids, uv) -> None:
+        self._timed("track", frame, feature_ids, uv)
 
 
 def filter_and_tracks(frames, source, size: tuple[int, int], pixel_mm: float) -> tuple[np.ndarray, object, float]:
@@ -110,16 +159,34 @@ def part_a(args) -> list[dict]:
 
 
 def image_run(label: dict, source_path: Path, truth: dict, pixel_mm: float, step: int, audited: bool = False,
-              max_track_frames: Optional[int] = None) -> dict:
+              max_track_frames: Optional[int] = None, front_end: str = "default", audit_only: bool = False) -> dict:
+    """The bank with the image front end ``front_end`` (a FRONT_ENDS name), the BA (unless
+    ``audit_only``) and the audit of its tracks (``audited`` or ``audit_only``)."""
     gray = read_gray_frames(source_path)
-    front_end = ImageFrontEnd(FrontEndOptions(), gray.image_size)
-    mean, tracks, filter_s = filter_and_tracks(gray.frames, front_end, gray.image_size, pixel_mm)
-    row = compare(dict(label, size=f"{gray.image_size[0]}x{gray.image_size[1]}"), truth, mean, tracks,
-                  gray.image_size, pixel_mm, step, filter_s, max_track_frames)
+    source = TimedSource(ImageFrontEnd(FrontEndOptions(**FRONT_ENDS[front_end]), gray.image_size))
+    mean, tracks, filter_s = filter_and_tracks(gray.frames, source, gray.image_size, pixel_mm)
+    label = dict(label, size=f"{gray.image_size[0]}x{gray.image_size[1]}", front_end=front_end,
+                 front_end_ms_per_frame=round(1e3 * source.cpu_s / max(source.calls, 1), 2))
+    if audit_only:
+        row = dict(label, truth=truth, filter=dict(zip(NAMES, mean.tolist())), filter_s=round(filter_s, 2),
+                   filter_f_error_pct=100 * (mean[0] / truth["f"] - 1), observations_recorded=len(tracks))
+        row["audit"] = track_errors(source_path, tracks)
+        print_audit(row)
+        return row
+    row = compare(label, truth, mean, tracks, gray.image_size, pixel_mm, step, filter_s, max_track_frames)
     print_row(row)
     if audited:
         row["audit"] = audit(source_path, tracks, mean, pixel_mm, step)
     return row
+
+
+def print_audit(row: dict) -> None:
+    a = row["audit"]
+    print(f"{row['front_end']:10s} {row['style']:15s} {row['size']} {row['seed']}: filter f {row['filter_f_error_pct']:+.1f} %"
+          f", track error rms {a['rms_px']:.2f} px, >2 px {100 * a['beyond_2px']:.1f} %, by age "
+          + ", ".join(f"{k}: {v['rms_px']:.2f} px radial {v['radial_per_radius']:+.1e}/px (n {v['n']})"
+                      for k, v in a["by_age"].items())
+          + f"; front end {row['front_end_ms_per_frame']:.1f} ms/frame", flush=True)
 
 
 def true_pixels(seq: Path, tracks) -> np.ndarray:
@@ -154,12 +221,10 @@ def true_pixels(seq: Path, tracks) -> np.ndarray:
     return project_civera(params, np.einsum("nij,nj->ni", R, Xo) + p, pixel_mm)
 
 
-def audit(seq: Path, tracks, filter_mean: np.ndarray, pixel_mm: float, step: int) -> dict:
-    """How far the front end's pixels are from the true ones (by track age; the radial component,
-    outwards positive, from the true principal point), and the BA on the true pixels of the same
-    observations (noise-free, and with 0.2 px independent noise)."""
-    import dataclasses
-
+def track_errors(seq: Path, tracks) -> dict:
+    """How far the front end's pixels are from the true ones: RMS, share beyond 2 px, and by track
+    age (observations within 2 px): RMS and the radial component (outwards positive, from the true
+    principal point), as a mean and per pixel of radius."""
     truth = json.loads((seq / "truth.json").read_text())
     params = np.array(truth["camera"]["params"])
     uv_true = true_pixels(seq, tracks)
@@ -182,6 +247,17 @@ def audit(seq: Path, tracks, filter_mean: np.ndarray, pixel_mm: float, step: int
                 # radial error per px of radius: a zoom of the tracks against the truth
                 "radial_per_radius": float(np.sum(radial[sel] * np.linalg.norm(offset[sel], axis=1))
                                            / np.sum(np.linalg.norm(offset[sel], axis=1) ** 2))}
+    return out
+
+
+def audit(seq: Path, tracks, filter_mean: np.ndarray, pixel_mm: float, step: int, with_ba: bool = True) -> dict:
+    """:func:`track_errors`, and the BA on the true pixels of the same observations (noise-free,
+    and with 0.2 px independent noise) unless not ``with_ba``."""
+    import dataclasses
+
+    out = track_errors(seq, tracks)
+    uv_true = true_pixels(seq, tracks)
+    params = np.array(json.loads((seq / "truth.json").read_text())["camera"]["params"])
     rng = np.random.default_rng(7)
     truth_d = dict(zip(NAMES, params.tolist()))
     for name, uv in (("ba_true_pixels", uv_true), ("ba_true_pixels_0.2px", uv_true + rng.normal(0, 0.2, uv_true.shape))):
@@ -205,7 +281,7 @@ def audit(seq: Path, tracks, filter_mean: np.ndarray, pixel_mm: float, step: int
 def part_b(args) -> list[dict]:
     rows = []
     for size in args.sizes.split(","):
-        for style in STYLES:
+        for style in args.styles.split(","):
             for seed in range(args.seed0, args.seed0 + args.seeds):
                 seq = Path(args.cache) / f"{style}_{size}_s{seed}_n{args.frames}"
                 if not (seq / "truth.json").exists():
@@ -214,53 +290,82 @@ def part_b(args) -> list[dict]:
                 camera = json.loads((seq / "truth.json").read_text())["camera"]
                 truth = dict(zip(NAMES, camera["params"]))
                 rows.append(image_run({"part": "b", "style": style, "seed": seed}, seq, truth,
-                                      float(camera["pixel_size_mm"][0]), args.step, args.audit, args.max_track_frames))
+                                      float(camera["pixel_size_mm"][0]), args.step, args.audit, args.max_track_frames,
+                                      args.front_end, args.audit_only))
     return rows
 
 
 def part_c(args) -> list[dict]:
     return [image_run({"part": "c", "style": "desk video", "seed": None}, DESK, DESK_TRUTH, DESK_PIXEL_SIZE_MM,
-                      args.step, max_track_frames=args.max_track_frames)]
+                      args.step, max_track_frames=args.max_track_frames, front_end=args.front_end)]
+
+
+def _groups(rows: list[dict], by_style: bool = True) -> dict:
+    """Rows with a BA result by (part, front end, style, size); style "all" unless ``by_style``."""
+    out: dict = {}
+    for r in rows:
+        if "f" in r.get("ba", {}):
+            key = (r["part"], r.get("front_end", "default"), r.get("style") if by_style else "all", r.get("size"))
+            out.setdefault(key, []).append(r)
+    return dict(sorted(out.items(), key=lambda item: str(item[0])))
+
+
+def _summary_of(group: list[dict]) -> dict:
+    inside = {n: sum(r["ba"]["inside"].get(n, False) for r in group) for n in NAMES if n in group[0]["ba"]["inside"]}
+    return {
+        "runs": len(group),
+        "filter_f_error_pct": [round(r["filter_f_error_pct"], 2) for r in group],
+        "ba_f_error_pct": [round(r["ba"]["f_error_pct"], 2) for r in group],
+        "ba_f_within_2pct": sum(abs(r["ba"]["f_error_pct"]) <= 2 for r in group),
+        "ba_inside_99": inside,
+        "ba_inside_all": sum(all(r["ba"]["inside"].values()) for r in group),
+        "ba_inside_99_tracks": {n: sum(r["ba"]["inside_tracks"].get(n, False) for r in group) for n in inside},
+        "ba_inside_all_tracks": sum(all(r["ba"]["inside_tracks"].values()) for r in group),
+        "ba_generic_f_error_pct": [round(r["ba_generic"].get("f_error_pct", np.nan), 2) for r in group],
+        "ba_generic_same": sum(abs(r["ba_generic"].get("f", np.inf) / r["ba"]["f"] - 1) <= 0.005 for r in group),
+        "ba_median_s": float(np.median([r["ba"]["elapsed_s"] for r in group])),
+        "filter_median_s": float(np.median([r["filter_s"] for r in group])),
+    }
 
 
 def summarise(rows: list[dict]) -> dict:
-    out = {}
-    for key in sorted({(r["part"], r.get("style"), r.get("size")) for r in rows}, key=str):
-        group = [r for r in rows if (r["part"], r.get("style"), r.get("size")) == key and "f" in r.get("ba", {})]
-        if not group:
-            continue
-        inside = {n: sum(r["ba"]["inside"].get(n, False) for r in group) for n in NAMES if n in group[0]["ba"]["inside"]}
-        out[" ".join(str(k) for k in key)] = {
-            "runs": len(group),
-            "filter_f_error_pct": [round(r["filter_f_error_pct"], 2) for r in group],
-            "ba_f_error_pct": [round(r["ba"]["f_error_pct"], 2) for r in group],
-            "ba_f_within_2pct": sum(abs(r["ba"]["f_error_pct"]) <= 2 for r in group),
-            "ba_inside_99": inside,
-            "ba_inside_all": sum(all(r["ba"]["inside"].values()) for r in group),
-            "ba_inside_99_tracks": {n: sum(r["ba"]["inside_tracks"].get(n, False) for r in group) for n in inside},
-            "ba_inside_all_tracks": sum(all(r["ba"]["inside_tracks"].values()) for r in group),
-            "ba_generic_f_error_pct": [round(r["ba_generic"].get("f_error_pct", np.nan), 2) for r in group],
-            "ba_median_s": float(np.median([r["ba"]["elapsed_s"] for r in group])),
-            "filter_median_s": float(np.median([r["filter_s"] for r in group])),
-        }
-    return out
+    return {" ".join(str(k) for k in key): _summary_of(group)
+            for grouping in (True, False) for key, group in _groups(rows, grouping).items()}
 
 
 def table(rows: list[dict]) -> str:
-    """Markdown: one line per part/style/size."""
-    lines = ["| part | style | size | runs | filter median abs f err % | BA median (max) abs f err % | BA f within 2 % "
-             "| BA truth in 99 % f/cx/cy/k1/k2 (model) | (by track) | generic start lands within 0.5 % of BA "
-             "| BA median s |", "|" + " --- |" * 11]
-    for key, g in summarise(rows).items():
-        part, style, size = key.split(" ", 1)[0], *key.split(" ", 1)[1].rsplit(" ", 1)
-        group = [r for r in rows if r["part"] == part and r.get("style") == style and r.get("size") == size
-                 and "f" in r.get("ba", {})]
-        same = sum(abs(r["ba_generic"].get("f", np.inf) / r["ba"]["f"] - 1) <= 0.005 for r in group)
-        inside = "/".join(str(v) for v in g["ba_inside_99"].values())
-        inside_t = "/".join(str(v) for v in g["ba_inside_99_tracks"].values())
-        lines.append(f"| {part} | {style} | {size} | {g['runs']} | {np.median(np.abs(g['filter_f_error_pct'])):.1f} "
-                     f"| {np.median(np.abs(g['ba_f_error_pct'])):.2f} ({np.max(np.abs(g['ba_f_error_pct'])):.2f}) "
-                     f"| {g['ba_f_within_2pct']} | {inside} | {inside_t} | {same} | {g['ba_median_s']:.1f} |")
+    """Markdown: one line per part/front end/style/size, then per part/front end/size."""
+    lines = ["| part | front end | style | size | runs | filter median abs f err % | BA median (max) abs f err % "
+             "| BA f within 2 % | BA truth in 99 % f/cx/cy/k1/k2 (model) | (by track) "
+             "| generic start lands within 0.5 % of BA | BA median s |", "|" + " --- |" * 12]
+    for grouping in (True, False):
+        for (part, front_end, style, size), group in _groups(rows, grouping).items():
+            g = _summary_of(group)
+            inside = "/".join(str(v) for v in g["ba_inside_99"].values())
+            inside_t = "/".join(str(v) for v in g["ba_inside_99_tracks"].values())
+            lines.append(f"| {part} | {front_end} | {style} | {size} | {g['runs']} "
+                         f"| {np.median(np.abs(g['filter_f_error_pct'])):.1f} "
+                         f"| {np.median(np.abs(g['ba_f_error_pct'])):.2f} ({np.max(np.abs(g['ba_f_error_pct'])):.2f}) "
+                         f"| {g['ba_f_within_2pct']} | {inside} | {inside_t} | {g['ba_generic_same']} "
+                         f"| {g['ba_median_s']:.1f} |")
+    return "\n".join(lines)
+
+
+def audit_table(rows: list[dict]) -> str:
+    """Markdown: the audit of the tracks per front end and size (medians over the runs)."""
+    bands = ("1-5", "5-15", "15-40", "40-1000000")
+    lines = ["| front end | size | runs | track error RMS px by age 1-5 / 5-15 / 15-40 / 40+ (median; max at 40+) "
+             "| abs radial per px of radius at 40+ (median; max) | > 2 px | front end CPU ms/frame |", "|" + " --- |" * 7]
+    for key in sorted({(r.get("front_end", "default"), r.get("size")) for r in rows if "audit" in r}, key=str):
+        group = [r for r in rows if "audit" in r and (r.get("front_end", "default"), r.get("size")) == key]
+        by_age = [[r["audit"]["by_age"][b] for r in group if b in r["audit"]["by_age"]] for b in bands]
+        radial = [abs(a["radial_per_radius"]) for a in by_age[-1]]
+        cost = [r["front_end_ms_per_frame"] for r in group if "front_end_ms_per_frame" in r]
+        lines.append(f"| {key[0]} | {key[1]} | {len(group)} | "
+                     + " / ".join(f"{np.median([a['rms_px'] for a in band]):.2f}" for band in by_age)
+                     + f" ({max(a['rms_px'] for a in by_age[-1]):.2f}) | {np.median(radial):.1e} ({max(radial):.1e}) "
+                     f"| {100 * np.mean([r['audit']['beyond_2px'] for r in group]):.2f} % "
+                     f"| {np.median(cost) if cost else float('nan'):.1f} |")
     return "\n".join(lines)
 
 
@@ -279,14 +384,29 @@ def main() -> None:
     ap.add_argument("--audit", action="store_true",
                     help="part b: also compare the tracks with the true pixels and run the BA on those")
     ap.add_argument("--table", nargs="*", metavar="JSON", help="only print the table of these result files")
+    ap.add_argument("--styles", default=",".join(STYLES), help="part b: these motion styles")
+    ap.add_argument("--front-end", default="default", choices=sorted(FRONT_ENDS),
+                    help="parts b, c: the image front end's options (FRONT_ENDS)")
+    ap.add_argument("--audit-only", action="store_true",
+                    help="part b: only the filter and the track errors of --audit (no bundle adjustment)")
     args = ap.parse_args()
     if args.table is not None:
-        print(table([r for path in args.table for r in json.loads(Path(path).read_text())["runs"]]))
+        rows = [r for path in args.table for r in json.loads(Path(path).read_text())["runs"]]
+        print(table(rows))
+        if any("audit" in r for r in rows):
+            print("\n" + audit_table(rows))
         return
     started = time.perf_counter()
     rows: list[dict] = []
     for part, run in (("a", part_a), ("b", part_b), ("c", part_c)):
         if part in args.parts:
+            if part == "b" and args.audit_only:
+                rows += run(args)
+                Path(args.out).write_text(json.dumps({"experiment": "exp_selfcalib_bundle (front-end audit)",
+                                                      "args": vars(args), "machine": machine_info(),
+                                                      "command": " ".join(sys.argv), "runs": rows}, indent=1,
+                                                     default=float))
+                continue
             rows += run(args)
             doc = {"experiment": "exp_selfcalib_bundle", "args": vars(args), "machine": machine_info(),
                    "command": " ".join(sys.argv), "total_wall_s": round(time.perf_counter() - started, 1),

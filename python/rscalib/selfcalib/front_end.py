@@ -1,12 +1,14 @@
 """The image front end of self-calibration: corners where the map is thin, patches stored at
 initialisation, and active search by normalised cross-correlation inside each feature's 99 %
 prediction ellipse, refined to sub-pixel by ECC affine alignment (docs/formulation.md §13,
-docs/sog.md §1). :class:`ImageFrontEnd` is the measurement source of
-:func:`rscalib.selfcalib.driver.run_bank` for images."""
+docs/sog.md §1); FrontEndOptions.subpixel "tracked" also keeps each feature's warp between frames
+(no drift as the view magnifies), "klt" tracks frame to frame (a comparison: it drifts).
+:class:`ImageFrontEnd` is the measurement source of :func:`rscalib.selfcalib.driver.run_bank` for
+images."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Optional
 
 import cv2
@@ -18,6 +20,7 @@ if TYPE_CHECKING:
     from .driver import FrameSearch
 
 CHI2_2DOF_99 = 9.210340371976184
+SUBPIXEL_MODES = ("affine", "parabola", "tracked", "klt")
 
 
 @dataclass
@@ -33,23 +36,107 @@ class FrontEndOptions:
     corner_quality: float = 0.01
     # "affine": refine each NCC peak by ECC alignment of the patch under an affine warp (the stored
     # patch is never re-cut, so scale/rotation changes as the camera moves would otherwise bias the
-    # match); "parabola": parabola through the NCC peak only.
+    # match); "parabola": parabola through the NCC peak only; "tracked": each feature keeps the
+    # warp (warp_model) of its last match, NCC searches with the original patch warped by it, ECC
+    # starts from it, and a match ECC cannot refine is dropped (no parabola fallback): the reference
+    # is always the first view, so errors do not accumulate, and walking towards a wall (scale > 1.7)
+    # no longer falls back to an unwarped patch (docs/sog.md §17: the drift of "affine").
     subpixel: str = "affine"
     max_refine_shift_px: float = 1.5
+    refine_half_px: int = 5           # "tracked": half size of the ECC template
+    max_warp_change: float = 1.25     # "tracked": per-frame change of the warp's singular values
+    max_warp_scale: float = 4.0       # "tracked": the warp's singular values within [1/this, this]
+    warp_model: str = "affine"        # "tracked": "affine" or "homography" (perspective across the patch)
+    # "klt": pyramidal Lucas-Kanade from the previous frame, started at the prediction, kept when the
+    # backward track returns within klt_max_fb_px, inside the 99 % ellipse and the original patch's
+    # NCC there is at least ncc_threshold; the others are searched as "affine" does (re-anchored).
+    # Measured: it drifts (a chain of frame-to-frame matches), "tracked" does not.
+    klt_max_fb_px: float = 0.5
+    klt_levels: int = 3
 
     def scaled(self, width: int) -> FrontEndOptions:
         """These options for images ``width`` pixels wide (the sizes above are for 320 px)."""
         scale = width / 320.0
         return FrontEndOptions(**{**self.__dict__,
                                   "patch_half_px": max(3, int(round(self.patch_half_px * max(1.0, scale ** 0.5)))),
+                                  "refine_half_px": max(3, int(round(self.refine_half_px * max(1.0, scale ** 0.5)))),
                                   "min_separation_px": self.min_separation_px * scale,
                                   "max_search_half_px": self.max_search_half_px * scale})
 
 
+def _shift(du: float, dv: float) -> np.ndarray:
+    return np.array([[1.0, 0.0, du], [0.0, 1.0, dv], [0.0, 0.0, 1.0]])
+
+
+class WarpedTemplate:
+    """A feature's first view, ``reference`` (float32, square, centred on the feature's first pixel),
+    and ``warp`` (3x3, fixing the origin): offsets around the feature in that view -> offsets in the
+    view it was last matched in; affine or a homography (subpixel "tracked")."""
+
+    def __init__(self, reference: np.ndarray) -> None:
+        self.reference = reference
+        self.warp = np.eye(3)
+
+    @property
+    def half(self) -> int:
+        return self.reference.shape[0] // 2
+
+    def search_patch(self, half: int) -> np.ndarray:
+        """The reference as the last match saw it: warped by ``warp``, (2 half + 1)² pixels."""
+        to_patch = _shift(half, half) @ self.warp @ _shift(-self.half, -self.half)
+        return cv2.warpPerspective(self.reference, to_patch, (2 * half + 1, 2 * half + 1), flags=cv2.INTER_LINEAR,
+                                   borderMode=cv2.BORDER_REPLICATE)
+
+    def refine(self, image: np.ndarray, u: float, v: float, options: FrontEndOptions, margin: int = 3
+               ) -> Optional[tuple[float, float]]:
+        """ECC alignment of the reference's central (2 refine_half_px + 1)² pixels near (u, v), started
+        from ``warp``; the refined centre (and ``warp`` updated), or None when ECC fails, the warp is
+        implausible or moved the centre more than max_refine_shift_px."""
+        rh, r = options.refine_half_px, self.half
+        template = self.reference[r - rh:r + rh + 1, r - rh:r + rh + 1]
+        reach = int(math.ceil(rh * np.linalg.norm(self.warp[:2, :2], 2) * 1.2)) + margin
+        x0, y0 = max(int(round(u)) - reach, 0), max(int(round(v)) - reach, 0)
+        x1, y1 = min(int(round(u)) + reach, image.shape[1] - 1), min(int(round(v)) + reach, image.shape[0] - 1)
+        if x1 - x0 < 2 * rh or y1 - y0 < 2 * rh:
+            return None
+        region = image[y0:y1 + 1, x0:x1 + 1].astype(np.float32)
+        homography = options.warp_model == "homography"
+        start = _shift(u - x0, v - y0) @ self.warp @ _shift(-rh, -rh)   # template pixels -> region pixels
+        try:
+            _, found = cv2.findTransformECC(
+                template, region, (start if homography else start[:2]).astype(np.float32),
+                cv2.MOTION_HOMOGRAPHY if homography else cv2.MOTION_AFFINE,
+                (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-4), None, 1)
+        except cv2.error:
+            return None
+        found = found.astype(np.float64) if homography else np.vstack([found.astype(np.float64), [0.0, 0.0, 1.0]])
+        centre = found @ [rh, rh, 1.0]
+        if not centre[2] > 0:
+            return None
+        centre_u, centre_v = centre[:2] / centre[2] + [x0, y0]
+        warp = _shift(x0 - centre_u, y0 - centre_v) @ found @ _shift(rh, rh)
+        warp /= warp[2, 2]
+        linear = warp[:2, :2]          # the warp's Jacobian at the feature
+        scales = np.linalg.svd(linear, compute_uv=False)
+        change = np.linalg.svd(linear @ np.linalg.inv(self.warp[:2, :2]), compute_uv=False)
+        if (np.linalg.det(linear) <= 0 or scales[0] > options.max_warp_scale or scales[1] < 1 / options.max_warp_scale
+                or change[0] > options.max_warp_change or change[1] < 1 / options.max_warp_change
+                or np.linalg.norm(warp[2, :2]) * rh > 0.25):    # the template's far side would fold
+            return None
+        if math.hypot(centre_u - u, centre_v - v) > options.max_refine_shift_px:
+            return None
+        self.warp = warp
+        return float(centre_u), float(centre_v)
+
+
 class PatchStore:
-    def __init__(self, half: int):
+    """Each feature's patch (uint8, (2 half + 1)²), or with ``reference_half`` its
+    :class:`WarpedTemplate` of that half size."""
+
+    def __init__(self, half: int, reference_half: Optional[int] = None):
         self.half = half
-        self.patches: dict[int, np.ndarray] = {}
+        self.reference_half = reference_half
+        self.patches: dict[int, object] = {}
 
     def cut(self, image: np.ndarray, uv: np.ndarray) -> Optional[np.ndarray]:
         u, v = int(round(uv[0])), int(round(uv[1]))
@@ -58,6 +145,14 @@ class PatchStore:
             return None
         patch = image[v - h:v + h + 1, u - h:u + h + 1]
         return patch if patch.std() > 2.0 else None   # flat patches cannot be matched
+
+    def add(self, image: np.ndarray, feature_id: int, uv: np.ndarray) -> None:
+        if self.reference_half is None:
+            self.patches[feature_id] = self.cut(image, uv).copy()
+            return
+        size = 2 * self.reference_half + 1    # sub-pixel centre; beyond the image edge: replicated
+        self.patches[feature_id] = WarpedTemplate(cv2.getRectSubPix(image, (size, size), (float(uv[0]), float(uv[1])),
+                                                                    patchType=cv2.CV_32F))
 
 
 def _subpixel_peak(scores: np.ndarray, x: int, y: int) -> tuple[float, float]:
@@ -96,43 +191,56 @@ def _refine_affine(image: np.ndarray, patch: np.ndarray, u: float, v: float, mar
     return float(centre[0] + x0), float(centre[1] + y0)
 
 
+def _ncc_peak(image: np.ndarray, patch: np.ndarray, uv_pred: np.ndarray, c: np.ndarray, options: FrontEndOptions
+              ) -> Optional[tuple[float, float]]:
+    """The NCC peak of ``patch`` inside the 99 % ellipse (covariance ``c``) around ``uv_pred``, with the
+    parabola's sub-pixel offset; None below ncc_threshold or when the search window is too small."""
+    height, width = image.shape
+    half = patch.shape[0] // 2
+    extent = np.minimum(np.sqrt(CHI2_2DOF_99 * np.diag(c)), options.max_search_half_px)
+    u0, v0 = uv_pred
+    x_lo = max(int(math.floor(u0 - extent[0])) - half, 0)
+    x_hi = min(int(math.ceil(u0 + extent[0])) + half, width - 1)
+    y_lo = max(int(math.floor(v0 - extent[1])) - half, 0)
+    y_hi = min(int(math.ceil(v0 + extent[1])) + half, height - 1)
+    if x_hi - x_lo + 1 < patch.shape[1] or y_hi - y_lo + 1 < patch.shape[0]:
+        return None
+    region = image[y_lo:y_hi + 1, x_lo:x_hi + 1]
+    scores = cv2.matchTemplate(region.astype(patch.dtype, copy=False), patch, cv2.TM_CCOEFF_NORMED)
+    # centres of the candidate windows, and the ellipse test on them
+    ys, xs = np.mgrid[0:scores.shape[0], 0:scores.shape[1]]
+    du = xs + x_lo + half - u0
+    dv = ys + y_lo + half - v0
+    info = np.linalg.inv(c + 1e-9 * np.eye(2))
+    inside = info[0, 0] * du * du + 2 * info[0, 1] * du * dv + info[1, 1] * dv * dv <= CHI2_2DOF_99
+    scores = np.where(inside, scores, -1.0)
+    y, x = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    if scores[y, x] < options.ncc_threshold:
+        return None
+    sx, sy = _subpixel_peak(scores, x, y)
+    return x + x_lo + half + sx, y + y_lo + half + sy
+
+
 def active_search(image: np.ndarray, patches: dict, ids: np.ndarray, uv_pred: np.ndarray, cov: np.ndarray,
                   options: FrontEndOptions) -> tuple[np.ndarray, np.ndarray]:
     """NCC match of each feature's patch inside its 99 % ellipse: (uv (n, 2), found (n,))."""
     n = len(ids)
     uv = np.full((n, 2), np.nan)
     found = np.zeros(n, dtype=bool)
-    height, width = image.shape
     for i in range(n):
         patch = patches.get(int(ids[i]))
-        if patch is None:
+        if patch is None or not np.all(np.isfinite(cov[i])):
             continue
-        half = patch.shape[0] // 2
-        c = cov[i]
-        if not np.all(np.isfinite(c)):
+        if isinstance(patch, WarpedTemplate):
+            peak = _ncc_peak(image, patch.search_patch(options.patch_half_px), uv_pred[i], cov[i], options)
+            refined = None if peak is None else patch.refine(image, peak[0], peak[1], options)
+            if refined is not None:
+                uv[i], found[i] = refined, True
             continue
-        extent = np.minimum(np.sqrt(CHI2_2DOF_99 * np.diag(c)), options.max_search_half_px)
-        u0, v0 = uv_pred[i]
-        x_lo = max(int(math.floor(u0 - extent[0])) - half, 0)
-        x_hi = min(int(math.ceil(u0 + extent[0])) + half, width - 1)
-        y_lo = max(int(math.floor(v0 - extent[1])) - half, 0)
-        y_hi = min(int(math.ceil(v0 + extent[1])) + half, height - 1)
-        if x_hi - x_lo + 1 < patch.shape[1] or y_hi - y_lo + 1 < patch.shape[0]:
+        peak = _ncc_peak(image, patch, uv_pred[i], cov[i], options)
+        if peak is None:
             continue
-        region = image[y_lo:y_hi + 1, x_lo:x_hi + 1]
-        scores = cv2.matchTemplate(region, patch, cv2.TM_CCOEFF_NORMED)
-        # centres of the candidate windows, and the ellipse test on them
-        ys, xs = np.mgrid[0:scores.shape[0], 0:scores.shape[1]]
-        du = xs + x_lo + half - u0
-        dv = ys + y_lo + half - v0
-        info = np.linalg.inv(c + 1e-9 * np.eye(2))
-        inside = info[0, 0] * du * du + 2 * info[0, 1] * du * dv + info[1, 1] * dv * dv <= CHI2_2DOF_99
-        scores = np.where(inside, scores, -1.0)
-        y, x = np.unravel_index(int(np.argmax(scores)), scores.shape)
-        if scores[y, x] < options.ncc_threshold:
-            continue
-        sx, sy = _subpixel_peak(scores, x, y)
-        uv[i] = (x + x_lo + half + sx, y + y_lo + half + sy)
+        uv[i] = peak
         found[i] = True
         if options.subpixel == "affine":
             refined = _refine_affine(image, patch, uv[i, 0], uv[i, 1])
@@ -163,26 +271,76 @@ class ImageFrontEnd:
 
     def __init__(self, options: Optional[FrontEndOptions], image_size: tuple[int, int]) -> None:
         options = options or FrontEndOptions()
-        if options.subpixel not in ("affine", "parabola"):
-            raise InputError(f"front_end.subpixel must be 'affine' or 'parabola', not {options.subpixel!r}")
+        if options.subpixel not in SUBPIXEL_MODES:
+            raise InputError(f"front_end.subpixel must be one of {', '.join(SUBPIXEL_MODES)}, not {options.subpixel!r}")
+        if options.warp_model not in ("affine", "homography"):
+            raise InputError(f"front_end.warp_model must be 'affine' or 'homography', not {options.warp_model!r}")
         self.options = options.scaled(int(image_size[0]))
-        self.store = PatchStore(self.options.patch_half_px)
+        # "tracked": the reference covers the search patch down to half scale (moving away)
+        reference_half = 2 * max(self.options.patch_half_px, self.options.refine_half_px) + 1 \
+            if self.options.subpixel == "tracked" else None
+        self.store = PatchStore(self.options.patch_half_px, reference_half)
+
+        self._last_frame: Optional[np.ndarray] = None     # "klt": the previous frame and its matches
+        self._last_uv: dict[int, np.ndarray] = {}
 
     def measure(self, frame: np.ndarray, ids: np.ndarray, uv_pred: np.ndarray,
                 cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return active_search(frame, self.store.patches, ids, uv_pred, cov, self.options)
+        if self.options.subpixel != "klt":
+            return active_search(frame, self.store.patches, ids, uv_pred, cov, self.options)
+        uv, found = self._klt(frame, ids, uv_pred, cov)
+        rest = ~found
+        if rest.any():
+            uv[rest], found[rest] = active_search(frame, self.store.patches, ids[rest], uv_pred[rest], cov[rest],
+                                                  replace(self.options, subpixel="affine"))
+        self._last_frame = frame
+        self._last_uv = {int(fid): p for fid, p, ok in zip(ids, uv, found) if ok}
+        return uv, found
+
+    def _klt(self, frame: np.ndarray, ids: np.ndarray, uv_pred: np.ndarray, cov: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+        uv = np.full((len(ids), 2), np.nan)
+        found = np.zeros(len(ids), dtype=bool)
+        have = [i for i, fid in enumerate(ids) if int(fid) in self._last_uv and np.all(np.isfinite(cov[i]))]
+        if self._last_frame is None or not have:
+            return uv, found
+        size = 2 * self.options.patch_half_px + 1
+        lk = dict(winSize=(size, size), maxLevel=self.options.klt_levels, flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
+                  criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+        start = np.array([self._last_uv[int(ids[i])] for i in have], np.float32).reshape(-1, 1, 2)
+        ahead, ok, _ = cv2.calcOpticalFlowPyrLK(self._last_frame, frame, start,
+                                                uv_pred[have].astype(np.float32).reshape(-1, 1, 2), **lk)
+        back, ok_back, _ = cv2.calcOpticalFlowPyrLK(frame, self._last_frame, ahead, start.copy(), **lk)
+        round_trip = np.linalg.norm((back - start).reshape(-1, 2), axis=1)
+        for j, i in enumerate(have):
+            p = ahead[j, 0].astype(np.float64)
+            d = p - uv_pred[i]
+            if not (ok[j, 0] and ok_back[j, 0] and round_trip[j] <= self.options.klt_max_fb_px
+                    and d @ np.linalg.solve(cov[i] + 1e-9 * np.eye(2), d) <= CHI2_2DOF_99):
+                continue
+            patch = self.store.patches[int(ids[i])]
+            seen = cv2.getRectSubPix(frame, patch.shape[::-1], (float(p[0]), float(p[1])), patchType=cv2.CV_32F)
+            if float(cv2.matchTemplate(seen, patch.astype(np.float32), cv2.TM_CCOEFF_NORMED)[0, 0]) \
+                    >= self.options.ncc_threshold:    # the original patch is still there: no slow drift
+                uv[i], found[i] = p, True
+        return uv, found
 
     def forget(self, feature_ids: np.ndarray) -> None:
         for fid in feature_ids:
             self.store.patches.pop(int(fid), None)
+            self._last_uv.pop(int(fid), None)
 
     def new_features(self, frame: np.ndarray, count: int, search: FrameSearch) -> np.ndarray:
         """Corners away from the predicted and the matched pixels of ``search``, where a patch can be cut."""
         avoid = np.vstack([search.uv_pred, search.uv[search.found]]) if len(search.ids) else np.zeros((0, 2))
-        uv = new_corners(frame, avoid, count, self.options, self.options.patch_half_px)
+        half = self.options.patch_half_px if self.store.reference_half is None \
+            else max(self.options.patch_half_px, self.options.refine_half_px)
+        uv = new_corners(frame, avoid, count, self.options, half)
         keep = [i for i, p in enumerate(uv) if self.store.cut(frame, p) is not None]
         return uv[keep] if keep else np.zeros((0, 2))
 
     def track(self, frame: np.ndarray, feature_ids: np.ndarray, uv: np.ndarray) -> None:
         for fid, p in zip(feature_ids, uv):
-            self.store.patches[int(fid)] = self.store.cut(frame, p).copy()
+            self.store.add(frame, int(fid), p)
+            self._last_uv[int(fid)] = np.asarray(p, np.float64)
+        self._last_frame = frame
