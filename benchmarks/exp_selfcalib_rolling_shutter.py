@@ -7,6 +7,7 @@ restarts: the filter's own estimate). Prints one row per run and writes a JSON.
 
     PYTHONPATH=python .venv/bin/python benchmarks/exp_selfcalib_rolling_shutter.py \\
         --renders /tmp/rscalib_h11_selfcalib_realistic --out benchmarks/results/exp_selfcalib_rolling_shutter.json
+    (--front-end tracked: the helper front ends of exp_selfcalib_bundle.FRONT_ENDS; --corrected-only)
 
 Renders: `bench_selfcalib_realistic.py --render` (folders style_WxH_sSEED_nFRAMES with truth.json).
 """
@@ -22,7 +23,7 @@ import numpy as np
 NAMES = ("f", "cx", "cy", "k1", "k2")
 
 
-def one_run(folder: Path, line_delay_s: float) -> dict:
+def one_run(folder: Path, line_delay_s: float, front_end_name: str = "default") -> dict:
     from rscalib.selfcalib.bundle import TrackRecorder, bundle_adjust
     from rscalib.selfcalib.calibrate import default_options, read_gray_frames
     from rscalib.selfcalib.driver import run_bank
@@ -34,7 +35,9 @@ def one_run(folder: Path, line_delay_s: float) -> dict:
     pixel_mm = float(truth["camera"]["pixel_size_mm"][0])
     gray = read_gray_frames(folder)
     width, height = gray.image_size
-    front_end = ImageFrontEnd(FrontEndOptions(), gray.image_size)
+    from exp_selfcalib_bundle import FRONT_ENDS
+
+    front_end = ImageFrontEnd(FrontEndOptions(**FRONT_ENDS[front_end_name]), gray.image_size)
     frames = gray.frames() if callable(gray.frames) else gray.frames
     source = front_end
     if line_delay_s > 0:
@@ -60,6 +63,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--renders", default="/tmp/rscalib_h11_selfcalib_realistic")
     parser.add_argument("--only", default="", help="comma-separated substrings of the folder names")
+    parser.add_argument("--front-end", default="default", help="exp_selfcalib_bundle.FRONT_ENDS name")
+    parser.add_argument("--corrected-only", action="store_true", help="skip the global-shutter-model run")
     parser.add_argument("--out", default=str(Path(__file__).parent / "results" / "exp_selfcalib_rolling_shutter.json"))
     args = parser.parse_args()
     folders = sorted(p for p in Path(args.renders).iterdir() if (p / "truth.json").exists())
@@ -71,9 +76,12 @@ def main() -> None:
         row = {"sequence": folder.name, "style": truth["style"], "seed": truth["seed"],
                "size": f'{truth["camera"]["width"]}x{truth["camera"]["height"]}',
                "true_line_delay_s": truth["line_delay_s"]}
+        row["front_end"] = args.front_end
         for label, d in (("global_shutter_model", 0.0), ("corrected", float(truth["line_delay_s"]))):
-            row[label] = one_run(folder, d)
-        g, c = row["global_shutter_model"], row["corrected"]
+            if label == "corrected" or not args.corrected_only:
+                row[label] = one_run(folder, d, args.front_end)
+        c = row["corrected"]
+        g = row.get("global_shutter_model", c)
         print(f'{folder.name:40s} filter f {g["filter_f_error_pct"]:+6.1f} -> {c["filter_f_error_pct"]:+6.1f} %   '
               f'BA f {g["ba_f_error_pct"]:+6.2f} -> {c["ba_f_error_pct"]:+6.2f} %   BA truth in 5 (tracks) '
               f'{sum(g["ba_inside_tracks"].values())} -> {sum(c["ba_inside_tracks"].values())}', flush=True)

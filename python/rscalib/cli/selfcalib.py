@@ -42,9 +42,10 @@ def add_parser(sub) -> None:
                           help="with --bank single: initial focal length in px (default: the middle of the f range)")
     advanced.add_argument("--f-sigma", type=FOCAL_PX, default=None,
                           help="with --bank single: initial sigma of f in px (default: a quarter of the f range)")
-    p.add_argument("--subpixel", choices=["affine", "parabola"], default="affine",
-                   help="match refinement: ECC affine alignment of the patch (default) or a parabola through "
-                        "the NCC peak")
+    p.add_argument("--subpixel", choices=["affine", "parabola", "tracked"], default="affine",
+                   help="match refinement: ECC affine alignment of the patch (default), a parabola through "
+                        "the NCC peak, or 'tracked': each feature's warp carried from its first view (tracks "
+                        "that do not drift; docs/sog.md §19)")
     p.add_argument("--no-restarts", action="store_true",
                    help="skip the check that the data determine the answer (two single EKFs restarted from the "
                         "estimate -+ 20 %%; docs/sog.md); the verdict is then 'not checked' and the exit code 3")
