@@ -71,8 +71,18 @@ def start_linedelay(video: Path, out: Path, logs: Path, quiet: bool = True) -> s
     argv = [sys.executable, "-m", "rscalib", "linedelay", str(video / "video.avi"), "--target",
             str(video / "target.yaml"), "--camera", str(video / "camera.yaml"), "--out", str(out), "--no-cache",
             "--workers", "2"] + (["--quiet"] if quiet else [])
-    return subprocess.Popen(argv, stdout=open(logs / "stdout", "w"), stderr=open(logs / "stderr", "w"),
-                            env=rscalib_env(), start_new_session=True)
+    # A shell starts background jobs with SIGINT ignored, and an ignored signal stays ignored across
+    # exec (Python then installs no KeyboardInterrupt handler): give the child the default, as a
+    # terminal's foreground job has, whatever this test process inherited.
+    inherited = signal.getsignal(signal.SIGINT)
+    if inherited == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        return subprocess.Popen(argv, stdout=open(logs / "stdout", "w"), stderr=open(logs / "stderr", "w"),
+                                env=rscalib_env(), start_new_session=True)
+    finally:
+        if inherited == signal.SIG_IGN:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def wait_for_workers(process: subprocess.Popen, count: int = 2, timeout_s: float = 120.0) -> list[int]:
