@@ -257,9 +257,10 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: 
     `intrinsics` (with the covariance of [d, intrinsics]) hold the outcome (docs/formulation.md §14).
     frame_poses: pnp.per_frame_pnp(observations, camera) when already computed (the self-check's
     halves take theirs from the whole video's: FramePoses.of_frames).
-    start_trajectory: a solved trajectory to start from instead of the PnP smoothing spline (the
-    self-check's halves start from the whole video's, with line_delay0_s its d): its knots inside this
-    data's time span are the first round's, and the adaptation goes on from there (docs/formulation.md §9).
+    start_trajectory: a solved trajectory to start from instead of the PnP smoothing spline (the whole
+    video starts from its self-check halves' joined trajectory, with line_delay0_s their mean d): its
+    knots inside this data's time span are the first round's, and the adaptation goes on from there
+    (docs/formulation.md §9).
     line_delay_score: also return each observation's linearised contribution to d
     (`result.line_delay_score`, for experiments on correlated errors: docs/experiments.md).
     progress: called after each round.
