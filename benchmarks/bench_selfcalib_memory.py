@@ -39,7 +39,12 @@ def main() -> None:
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     elapsed = time.time() - started
     print(f"step {step}, {count} frames, max_features {options.max_features}: map max {max(maps)}, "
-          f"peak RSS {peak_mb:.0f} MB, {elapsed:.0f} s ({count / elapsed:.1f} frames/s), f {result.mean[0]:.1f} px")
+          f"peak RSS {peak_mb:.0f} MB, {elapsed:.0f} s ({count / elapsed:.1f} frames/s), f {result.mean[0]:.1f} px "
+          f"({result.estimate_from})")
+    if result.bundle is not None:   # the bundle adjustments (whole tracks, and cut) are inside the peak
+        cut_s = result.bundle_cut.elapsed_s if result.bundle_cut is not None else float("nan")
+        print(f"bundle adjustment: {result.bundle.keyframes} keyframes, {result.bundle.points} points, "
+              f"{result.bundle.observations} observations, {result.bundle.elapsed_s:.1f} s + drift check {cut_s:.1f} s")
     pruned = next((k for k, (gaussians, _, _) in enumerate(clocks) if gaussians == 1), None)
     if pruned is not None and pruned < len(clocks) - 1:
         frames_after = len(clocks) - 1 - pruned

@@ -14,7 +14,7 @@ whether the truth is inside, the "determined" verdict, wall time and peak RSS (/
 
 Usage: PYTHONPATH=python .venv/bin/python benchmarks/bench_selfcalib_realistic.py
            [--seeds 5] [--seed0 1100] [--frames 200] [--workers 2] [--cache /tmp/rscalib_h11_selfcalib_realistic]
-           [--out benchmarks/results/bench_selfcalib_realistic.json]
+           [--out benchmarks/results/bench_selfcalib_realistic.json] [--rolling-shutter none|truth] [--tag T]
        --feature-level: the filter alone on true correspondences of the same motions (320x240, no images)
 Photographs: $RSCALIB_SHARED_DATA, else ../shared/data beside the repository (worktrees: set the variable).
 """
@@ -41,7 +41,8 @@ def pixel_size_mm(width: int) -> float:
     return PAPER_PIXEL_SIZE_MM if width == 320 else PHONE_PIXEL_SIZE_MM
 
 
-def run_one(style: str, size: tuple[int, int], seed: int, frames: int, cache: str) -> dict:
+def run_one(style: str, size: tuple[int, int], seed: int, frames: int, cache: str, rolling_shutter: str = "none",
+            tag: str = "") -> dict:
     from rscalib.sim.scene_realism import render_realistic_scene
 
     seq = Path(cache) / f"{style}_{size[0]}x{size[1]}_s{seed}_n{frames}"
@@ -49,10 +50,12 @@ def run_one(style: str, size: tuple[int, int], seed: int, frames: int, cache: st
     if not (seq / "truth.json").exists():  # truth.json is written last
         render_s = render_realistic_scene(seq, style, size, frames, seed).elapsed_s
     truth = json.loads((seq / "truth.json").read_text())
-    out = Path(cache) / "runs" / seq.name
+    out = Path(cache) / f"runs{tag}" / seq.name
     cmd = [sys.executable, "-m", "rscalib", "selfcalib", str(seq), "--pixel-size-mm", str(pixel_size_mm(size[0])),
            "--out", str(out), "--quiet"]
-    log = Path(cache) / "runs" / f"{seq.name}.log"
+    if rolling_shutter == "truth":   # as measured by `rscalib linedelay` (0.15 % median error, docs/benchmarks.md)
+        cmd += ["--line-delay", repr(float(truth["line_delay_s"]))]
+    log = Path(cache) / f"runs{tag}" / f"{seq.name}.log"
     log.parent.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     rss_file = log.with_suffix(".maxrss")
@@ -82,6 +85,21 @@ def run_one(style: str, size: tuple[int, int], seed: int, frames: int, cache: st
         fb = row["filter_bounds_99"]
         row["inside_filter"] = {n: bool(fb[n] is not None and fb[n][0] <= row["truth"][n] <= fb[n][1]) for n in NAMES}
         row["f_error_pct"] = 100.0 * (result["f"] / row["truth"]["f"] - 1.0)
+        row["estimate_from"] = result.get("estimate_from", "filter")
+        if result.get("filter"):
+            row["filter_f_error_pct"] = 100.0 * (result["filter"]["f"] / row["truth"]["f"] - 1.0)
+        ba = result.get("bundle")
+        if ba:
+            row["bundle"] = {n: ba[n] for n in NAMES}
+            for kind in ("tracks", "clustered"):
+                row[f"bundle_bounds_99_{kind}"] = {n: ba[f"{n}_bounds_99_{kind}"] for n in NAMES}
+                row[f"inside_bundle_{kind}"] = {n: bool(ba[f"{n}_bounds_99_{kind}"][0] <= row["truth"][n]
+                                                        <= ba[f"{n}_bounds_99_{kind}"][1]) for n in NAMES}
+            bb = dict(zip(NAMES, result["bundle_bounds_99"]))   # with the drift's systematic error
+            row["bundle_bounds_99"] = bb
+            row["inside_bundle"] = {n: bool(bb[n][0] <= row["truth"][n] <= bb[n][1]) for n in NAMES}
+            row["bundle_f_half_width_pct"] = 50.0 * (bb["f"][1] - bb["f"][0]) / ba["f"]
+            row["bundle_s"] = ba["elapsed_s"]
     return row
 
 
@@ -100,6 +118,18 @@ def summarise(rows: list[dict]) -> dict:
         "determined": frac(len(det), len(ok)),
         "determined_f_within_2pct": frac(sum(abs(r["f_error_pct"]) <= 2.0 for r in det), len(det)),
         "determined_truth_inside_all_five": frac(sum(all(r["inside"].values()) for r in det), len(det)),
+        "determined_truth_inside_each": {n: frac(sum(r["inside"][n] for r in det), len(det)) for n in NAMES},
+        "bundle_truth_inside_all_five_any_verdict": frac(sum(all(r["inside_bundle"].values()) for r in ok
+                                                             if "inside_bundle" in r), len(ok)),
+        "bundle_truth_inside_each_any_verdict": {n: frac(sum(r["inside_bundle"][n] for r in ok if "inside_bundle" in r),
+                                                         len(ok)) for n in NAMES},
+        "bundle_clustered_only_inside_all_five_any_verdict": frac(sum(all(r["inside_bundle_clustered"].values())
+                                                                      for r in ok if "inside_bundle_clustered" in r),
+                                                                  len(ok)),
+        "bundle_by_track_only_inside_all_five_any_verdict": frac(sum(all(r["inside_bundle_tracks"].values())
+                                                                     for r in ok if "inside_bundle_tracks" in r), len(ok)),
+        "median_abs_f_error_pct_estimate": round(sorted(abs(r["f_error_pct"]) for r in ok)[len(ok) // 2], 2)
+        if ok else None,
         "sideways_flagged_not_determined": frac(sum(not r["determined"] for r in side), len(side)),
         "sideways_confidently_wrong": frac(sum(r["determined"] and not all(r["inside"].values()) for r in side),
                                            len(side)),
@@ -171,14 +201,18 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--cache", default="/tmp/rscalib_h11_selfcalib_realistic")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "bench_selfcalib_realistic.json"))
+    ap.add_argument("--rolling-shutter", choices=["none", "truth"], default="none",
+                    help="truth: pass each render's line delay as --line-delay (what `rscalib linedelay` measures); "
+                         "none: the user does not know it (a global-shutter model)")
+    ap.add_argument("--tag", default="", help="suffix of the runs folder under CACHE (keeps variants apart)")
     ap.add_argument("--feature-level", action="store_true",
                     help="only the filter on true correspondences of the same motions (no images); prints, writes nothing")
     args = ap.parse_args()
     if args.feature_level:
         feature_level(range(args.seed0, args.seed0 + args.seeds), args.frames)
         return
-    jobs = [(style, size, args.seed0 + k, args.frames, args.cache) for k in range(args.seeds) for size in SIZES
-            for style in STYLES]
+    jobs = [(style, size, args.seed0 + k, args.frames, args.cache, args.rolling_shutter, args.tag)
+            for k in range(args.seeds) for size in SIZES for style in STYLES]
     started = time.perf_counter()
     rows = []
     with ProcessPoolExecutor(args.workers) as pool:
@@ -190,7 +224,8 @@ def main() -> None:
             print(f"{row['style']:15s} {row['size']} seed {row['seed']}: exit {row['exit']} "
                   f"f {est.get('f', float('nan')):.1f} (truth {row['truth']['f']:.1f}, {row.get('f_error_pct', 0):+.1f} %) "
                   f"determined {row.get('determined')} inside {sum(row.get('inside', {}).values())}/5 "
-                  f"filter-inside {sum(row.get('inside_filter', {}).values())}/5 {row['wall_s']} s "
+                  f"BA-inside {sum(row.get('inside_bundle', {}).values())}/5 "
+                  f"hw {row.get('bundle_f_half_width_pct', float('nan')):.2f} % {row['wall_s']} s "
                   f"{row.get('peak_rss_mb')} MB", flush=True)
             doc = write(args, rows, started, len(jobs))  # after every run: a partial result survives
     print(json.dumps(doc["summary"], indent=1))

@@ -14,7 +14,7 @@ import pytest
 
 CLI = [sys.executable, "-m", "rscalib.cli"]
 # Leaves that legitimately change from run to run: wall times and the provenance of the run.
-VOLATILE = re.compile(r"(_time_s|frames_per_s|\.provenance\.(command_line|created_utc))$")
+VOLATILE = re.compile(r"(_time_s|elapsed_s|frames_per_s|\.provenance\.(command_line|created_utc))$")
 
 
 def run(*args, ok=(0, 3)):

@@ -42,13 +42,19 @@ def add_parser(sub) -> None:
                           help="with --bank single: initial focal length in px (default: the middle of the f range)")
     advanced.add_argument("--f-sigma", type=FOCAL_PX, default=None,
                           help="with --bank single: initial sigma of f in px (default: a quarter of the f range)")
-    p.add_argument("--subpixel", choices=["affine", "parabola", "tracked"], default="affine",
-                   help="match refinement: ECC affine alignment of the patch (default), a parabola through "
-                        "the NCC peak, or 'tracked': each feature's warp carried from its first view (tracks "
-                        "that do not drift; docs/sog.md §19)")
+    p.add_argument("--subpixel", choices=["affine", "parabola", "tracked"], default="tracked",
+                   help="match refinement: 'tracked' (default): each feature's warp carried from its first view, "
+                        "tracks that do not drift (docs/sog.md §19); 'affine': ECC alignment from the identity "
+                        "in every frame; 'parabola' through the NCC peak")
+    p.add_argument("--determined-within", type=number(1e-4, 0.5), default=0.02, metavar="FRACTION",
+                   help="call the calibration determined (exit 0) when the 99 %% interval of f is within "
+                        "+-FRACTION of f (default 0.02: 2 %%)")
+    p.add_argument("--no-bundle", action="store_true",
+                   help="the filter's estimate only, without the bundle adjustment over its tracks; "
+                        "'determined' is then judged by restarting two single filters (docs/sog.md §15)")
     p.add_argument("--no-restarts", action="store_true",
-                   help="skip the check that the data determine the answer (two single EKFs restarted from the "
-                        "estimate -+ 20 %%; docs/sog.md); the verdict is then 'not checked' and the exit code 3")
+                   help="with --no-bundle: skip the restart check; the verdict is then 'not checked' and the "
+                        "exit code 3")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -93,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
     result = self_calibrate(frames, video.image_size, restarts=not args.no_restarts, pixel_size_mm=args.pixel_size_mm, options=options,
                             grid=grid, front_end=FrontEndOptions(subpixel=args.subpixel), max_frames=args.max_frames,
                             progress=not args.quiet, expected_frames=video.frame_count_estimate,
-                            line_delay_s=args.line_delay)
+                            line_delay_s=args.line_delay, bundle=not args.no_bundle,
+                            max_f_half_width=args.determined_within)
     out = Path(args.out)
     written = write_selfcalib_outputs(
         result, out, extra={"bank": args.bank, "subpixel": args.subpixel, "timestamps_from": video.timestamps_from},
@@ -101,11 +108,17 @@ def run(args: argparse.Namespace) -> int:
                 "bank": args.bank, "f_range": args.f_range, "f0": args.f0, "f_sigma": args.f_sigma,
                 "sprt_alpha": options.sprt_alpha, "sprt_beta": options.sprt_beta, "subpixel": args.subpixel,
                 "restarts": not args.no_restarts, "ransac_hypotheses": options.ransac_hypotheses,
-                "max_features": options.max_features, "line_delay_s": args.line_delay})
-    m, b = result.mean, result.bounds_99
-    print(f"f {m[0]:.2f} px [{b[0, 0]:.2f}, {b[0, 1]:.2f}], cx {m[1]:.2f}, cy {m[2]:.2f}, k1 {m[3]:.5f} mm^-2, "
-          f"k2 {m[4]:.5f} mm^-4; {result.gaussians_left} of {result.gaussians_initial} Gaussians left after "
-          f"{result.frames_processed} frames ({result.frames_per_s:.1f} frames/s)")
+                "max_features": options.max_features, "line_delay_s": args.line_delay,
+                "bundle": not args.no_bundle, "determined_within": args.determined_within})
+    m, b, fm = result.mean, result.bounds_99, result.filter_mean
+    print(f"filter: f {fm[0]:.2f} px, cx {fm[1]:.2f}, cy {fm[2]:.2f}; {result.gaussians_left} of "
+          f"{result.gaussians_initial} Gaussians left after {result.frames_processed} frames "
+          f"({result.frames_per_s:.1f} frames/s)")
+    if result.bundle_error:
+        print(f"warning: bundle adjustment failed: {result.bundle_error}", file=sys.stderr)
+    print(f"{result.estimate_from} (in camera.yaml): f {m[0]:.2f} px [{b[0, 0]:.2f}, {b[0, 1]:.2f}], "
+          f"cx {m[1]:.2f} [{b[1, 0]:.2f}, {b[1, 1]:.2f}], cy {m[2]:.2f} [{b[2, 0]:.2f}, {b[2, 1]:.2f}], "
+          f"k1 {m[3]:.5f} mm^-2, k2 {m[4]:.5f} mm^-4 (reported 99 % bounds)")
     print(f"OpenCV camera: {written.camera_yaml} (within {written.opencv_max_difference_px:.3f} px of the "
           "civera-radial model)")
     if result.determined:

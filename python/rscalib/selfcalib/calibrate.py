@@ -15,6 +15,7 @@ from .._progress import Progress, ProgressArg
 from ..errors import InputError
 from ..io.limits import check_memory, check_source_memory, frame_memory_bytes
 from ..io.video import open_source
+from .bundle import BundleResult, TrackRecorder, bundle_adjust
 from .driver import SelfCalibHistory, run_bank
 from .front_end import FrontEndOptions, ImageFrontEnd
 from .prior import PAPER_PIXEL_SIZE_MM, initial_bank, make_bank, single_gaussian_grid
@@ -22,7 +23,8 @@ from .rolling_shutter import RollingShutterCorrection, timed_frames
 
 __all__ = ["PARAM_NAMES", "GrayFrames", "Restart", "SelfCalibResult", "civera_to_opencv", "judge_determined",
            "read_gray_frames", "self_calibrate", "default_options", "RANSAC_HYPOTHESES", "RESTART_OFFSET", "DETERMINED_MAX_CONTRACTION",
-           "DETERMINED_PP_TOLERANCE", "UNDETERMINED_PP_HALF_WIDTH", "FILTER_MEMORY_FACTOR", "map_size_bound",
+           "DETERMINED_PP_TOLERANCE", "UNDETERMINED_PP_HALF_WIDTH", "DETERMINED_F_HALF_WIDTH", "MIN_BUNDLE_POINTS",
+           "MAX_BUNDLE_KEYFRAMES", "BUNDLE_DRIFT_CUT_FRAMES", "bundle_covariance", "judge_bundle", "FILTER_MEMORY_FACTOR", "map_size_bound",
            "predicted_memory_bytes"]
 
 PARAM_NAMES = ("f", "cx", "cy", "k1", "k2")
@@ -44,6 +46,26 @@ DETERMINED_MAX_CONTRACTION = 0.35
 DETERMINED_PP_TOLERANCE = 0.02
 UNDETERMINED_PP_HALF_WIDTH = 0.05
 _Z99 = 2.5758293035489004
+# "Determined" with the bundle adjustment (the default since issue 11; docs/sog.md §20): the
+# adjustment over the filter's tracks (bundle.py) removes the filter's bias, and its covariance
+# clustered by feature track (errors correlated along a track count once) is the bound. Determined:
+# the adjustment converged over >= MIN_BUNDLE_POINTS tracks (fewer clusters make a clustered
+# covariance itself uncertain; the real desk video has 32-60) and its 99 % interval of f is within
+# +-DETERMINED_F_HALF_WIDTH of f: a user's requirement ("f known to 2 %"), not a fitted number.
+DETERMINED_F_HALF_WIDTH = 0.02
+MIN_BUNDLE_POINTS = 30
+# Converged: the solver stopped on its own criterion, or the camera's remaining Gauss-Newton step is
+# under BUNDLE_STEP_SIGMA of its (model) sigma: it moves no more than a tenth of its uncertainty.
+BUNDLE_STEP_SIGMA = 0.1
+# The tracks' drift as a systematic error: the adjustment is repeated with every track cut into
+# pieces of BUNDLE_DRIFT_CUT_FRAMES frames (each piece its own point, so a drifting patch re-anchors),
+# and the shift of the camera between the two counts as one more standard error per parameter
+# (docs/sog.md §20). On look-around renders whole tracks left cx 5.7 px off at a 0.5 px sigma; the
+# pieces moved it 4.5 px.
+BUNDLE_DRIFT_CUT_FRAMES = 40
+# Keyframes every 3rd frame (the experiments of docs/sog.md §17-19), sparser on longer sequences so the
+# adjustment's dense pose block stays small.
+MAX_BUNDLE_KEYFRAMES = 100
 # 1-point RANSAC (Civera et al., JFR 2010) is on in the image path: on the real desk video it moved the
 # principal point from (303.2, 219.1) to (312.7, 235.7) against the truth (308.6, 236.5); on the
 # clean rendered room sequences it changes nothing (docs/sog.md §14).
@@ -96,6 +118,21 @@ class SelfCalibResult:
     reason: str = ""
     filter_bounds_99: Optional[np.ndarray] = None
     restarts: list = field(default_factory=list)
+    # The bundle adjustment over the filter's tracks (None: not run or failed, see bundle_error);
+    # estimate_from says which estimate ``mean`` (and so camera() and camera.yaml) is.
+    filter_mean: Optional[np.ndarray] = None
+    bundle: Optional[BundleResult] = None
+    bundle_cut: Optional[BundleResult] = None     # the drift check: tracks cut into pieces
+    bundle_error: str = ""
+    estimate_from: str = "filter"
+
+    def bundle_bounds_99(self) -> Optional[np.ndarray]:
+        """The bundle adjustment's 99 % bounds (5, 2) with the drift's systematic error
+        (bundle_covariance), whether or not they are the reported ones; None without an adjustment."""
+        if self.bundle is None:
+            return None
+        half = _Z99 * np.sqrt(np.diag(bundle_covariance(self.bundle, self.bundle_cut)))
+        return np.c_[self.bundle.camera - half, self.bundle.camera + half]
 
     @property
     def frames_processed(self) -> int:
@@ -126,6 +163,12 @@ class SelfCalibResult:
                    determined=self.determined, reason=self.reason,
                    filter_bounds_99=None if self.filter_bounds_99 is None else self.filter_bounds_99.tolist(),
                    restarts=[r.summary_dict() for r in self.restarts],
+                   estimate_from=self.estimate_from,
+                   filter=None if self.filter_mean is None else dict(zip(PARAM_NAMES, map(float, self.filter_mean))),
+                   bundle=None if self.bundle is None else self.bundle.summary_dict(),
+                   bundle_tracks_cut=None if self.bundle_cut is None else self.bundle_cut.summary_dict(),
+                   bundle_bounds_99=None if self.bundle is None else self.bundle_bounds_99().tolist(),
+                   bundle_error=self.bundle_error,
                    max_map_size=int(self.history.map_size.max()) if len(self.history) else 0,
                    history=self.history.summary_dict())
         return out
@@ -228,6 +271,52 @@ def judge_determined(mean: np.ndarray, bounds_99: np.ndarray, gaussians_left: in
                   "difference remains)"), bounds
 
 
+def bundle_covariance(ba: BundleResult, cut: Optional[BundleResult]) -> np.ndarray:
+    """The reported covariance of the adjusted camera (5, 5): clustered by track and keyframe, plus the
+    squared shift to the adjustment over tracks cut into pieces (the drift's systematic error) on the
+    diagonal; without the cut adjustment, infinite."""
+    if cut is None:
+        return np.full((5, 5), np.inf)
+    return ba.covariance_clustered + np.diag((ba.camera - cut.camera) ** 2)
+
+
+def judge_bundle(ba: Optional[BundleResult], cut: Optional[BundleResult], error: str, prior_bounds: np.ndarray,
+                 max_f_half_width: float = DETERMINED_F_HALF_WIDTH) -> tuple[bool, str, np.ndarray]:
+    """(determined, reason, bounds to report) from the bundle adjustment ``ba`` and the same over
+    tracks cut into pieces ``cut``: determined when it converged over >= MIN_BUNDLE_POINTS tracks and
+    the 99 % interval of f from bundle_covariance is within +-``max_f_half_width`` of f; the bounds
+    are then that interval for all five. Not determined: the prior's bounds, widened to include the
+    estimate."""
+    if ba is None:
+        return False, f"the bundle adjustment failed ({error})", prior_bounds.copy()
+    f = float(ba.camera[0])
+    half_all = _Z99 * np.sqrt(np.diag(bundle_covariance(ba, cut)))
+    reported = np.c_[ba.camera - half_all, ba.camera + half_all]
+    lo, hi = reported[0]
+    half = 0.5 * float(hi - lo) / f
+    spread = (f"f {f:.1f} px, 99 % [{lo:.1f}, {hi:.1f}] (+-{100 * half:.1f} %: clustered by feature track and "
+              "keyframe, plus the tracks' drift)")
+    problem = ""
+    if ba.status <= 0 and not ba.step_sigma <= BUNDLE_STEP_SIGMA:
+        problem = (f"the bundle adjustment did not converge ({ba.message}; the camera is still "
+                   f"{ba.step_sigma:.2f} sigma from the minimum)")
+    elif ba.points < MIN_BUNDLE_POINTS:
+        problem = (f"only {ba.points} feature tracks span 3 or more keyframes (>= {MIN_BUNDLE_POINTS} needed for "
+                   "a bound; a textured scene seen for longer?)")
+    elif cut is None:
+        problem = f"the drift check (the adjustment over tracks cut into pieces) failed ({error})"
+    elif not np.all(np.isfinite(reported)) or not half <= max_f_half_width:
+        problem = (f"the data pin f only to +-{100 * half:.1f} % (bundle adjustment {spread}; determined needs "
+                   f"+-{100 * max_f_half_width:g} %): little rotation, or a mostly sideways motion?")
+    if problem:
+        bounds = prior_bounds.copy()
+        bounds[:, 0] = np.minimum(bounds[:, 0], ba.camera)
+        bounds[:, 1] = np.maximum(bounds[:, 1], ba.camera)
+        return False, problem, bounds
+    return True, (f"bundle adjustment over {ba.points} tracks and {ba.keyframes} keyframes: {spread}, "
+                  f"residual {ba.sigma_px:.2f} px"), reported
+
+
 def map_size_bound(options: _core.SogOptions, min_visible: int, max_new_per_frame: int,
                    frames: Optional[int]) -> int:
     """The most features the map can hold: the cap plus one frame's new features (the bank caps
@@ -257,17 +346,45 @@ def _frame_count(frames, max_frames: Optional[int], expected_frames: Optional[in
 
 
 def _run(frames, width: int, height: int, pixel_size_mm, options, front_end, initial, max_frames, on_frame,
-         line_delay_s: float = 0.0) -> tuple[_core.SogBank, SelfCalibHistory, ImageFrontEnd]:
+         line_delay_s: float = 0.0, record: bool = False
+         ) -> tuple[_core.SogBank, SelfCalibHistory, ImageFrontEnd, Optional[TrackRecorder]]:
     source = front_end if isinstance(front_end, ImageFrontEnd) else ImageFrontEnd(front_end, (width, height))
     bank = make_bank(width, height, pixel_size_mm, options=options, bank=initial)
     gray = _checked_gray(frames, width, height)
     measured = source
     if line_delay_s > 0:  # measurements moved to one time per frame (rolling_shutter.py)
         measured, gray = RollingShutterCorrection(source, line_delay_s, height), timed_frames(gray)
+    recorder = None
+    if record:   # what the bank used, for the bundle adjustment (bundle.TrackRecorder)
+        recorder = measured = TrackRecorder(measured)
+
+        def each(k, running, report, user=on_frame):
+            recorder.on_frame(k, running, report)
+            if user is not None:
+                user(k, running, report)
+        on_frame = each
     history = run_bank(bank, gray, measured, min_visible=source.options.min_visible,
                        max_new_per_frame=source.options.max_new_per_frame, max_frames=max_frames,
                        on_frame=on_frame)
-    return bank, history, source
+    return bank, history, source, recorder
+
+
+def _bundle(recorder: TrackRecorder, camera0: np.ndarray, pixel_size_mm, frames: int
+            ) -> tuple[Optional[BundleResult], Optional[BundleResult], str]:
+    """The adjustment over whole tracks and over tracks cut into BUNDLE_DRIFT_CUT_FRAMES pieces
+    (None where it failed) and the error message."""
+    step = max(3, -(-frames // MAX_BUNDLE_KEYFRAMES))
+    tracks = recorder.tracks()
+    try:
+        ba = bundle_adjust(tracks, camera0, pixel_size_mm, keyframe_step=step)
+    except (ValueError, np.linalg.LinAlgError) as error:   # InputError is a ValueError
+        return None, None, str(error)
+    try:
+        cut = bundle_adjust(tracks, ba.camera, pixel_size_mm, keyframe_step=step,
+                            max_track_frames=BUNDLE_DRIFT_CUT_FRAMES)
+    except (ValueError, np.linalg.LinAlgError) as error:
+        return ba, None, str(error)
+    return ba, cut, ""
 
 
 def self_calibrate(frames, image_size: tuple[int, int], *,
@@ -276,7 +393,8 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
                    max_frames: Optional[int] = None, progress: ProgressArg = None,
                    expected_frames: Optional[int] = None,
                    on_frame: Optional[Callable[[int, _core.SogBank, _core.SogUpdateReport], None]] = None,
-                   restarts: bool = True, line_delay_s: float = 0.0) -> SelfCalibResult:
+                   restarts: bool = True, line_delay_s: float = 0.0, bundle: bool = True,
+                   max_f_half_width: float = DETERMINED_F_HALF_WIDTH) -> SelfCalibResult:
     """Run the SOG bank over `frames`: an iterable of (time_s, image), grayscale or BGR uint8, or a
     callable returning a fresh such iterable (then the frames are read again for the restarts);
     an image of None (unreadable) is skipped.
@@ -288,8 +406,11 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
     progress: False/None, True (a progress bar on stderr) or a callable(done, total), with
     `expected_frames` the bar's total when `max_frames` is not given;
     on_frame(k, bank, report) is called after every processed frame of the bank's pass;
-    restarts: check that the data determine the answer (judge_determined) when the frames can be
-    read again;
+    bundle: refine with a bundle adjustment over the filter's tracks (bundle.bundle_adjust), which is
+    then the estimate and judges "determined" (judge_bundle, f's 99 % interval within
+    +-``max_f_half_width``); False: the filter's estimate, judged by restarts;
+    restarts: without the bundle adjustment, check that the data determine the answer
+    (judge_determined) when the frames can be read again;
     line_delay_s: the sensor's line delay (s/row; e.g. from `rscalib linedelay`), > 0 to compensate
     the rolling shutter in every measurement (rolling_shutter.RollingShutterCorrection), 0: none."""
     if not (np.isfinite(line_delay_s) and line_delay_s >= 0):
@@ -307,7 +428,9 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
                          f"{width}x{height} frames (Gaussians x (18 + 6 x features)^2 x 8 B x {FILTER_MEMORY_FACTOR} "
                          "+ the frame)")
     per_pass = max_frames if max_frames is not None else expected_frames
-    checking = restarts and factory is not None and not isinstance(front_end, ImageFrontEnd)
+    if not (np.isfinite(max_f_half_width) and max_f_half_width > 0):
+        raise InputError(f"the half-width of f for 'determined' must be positive, not {max_f_half_width!r}")
+    checking = restarts and not bundle and factory is not None and not isinstance(front_end, ImageFrontEnd)
     total = None if per_pass is None else per_pass * (3 if checking else 1)
     with Progress(progress, total, "self-calibrating") as bar:
         def each_frame(k: int, running: _core.SogBank, report: _core.SogUpdateReport) -> None:
@@ -315,8 +438,8 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
             if on_frame is not None:
                 on_frame(k, running, report)
 
-        bank, history, source = _run(first_frames, width, height, pixel_size_mm, options, front_end, initial,
-                                     max_frames, each_frame, line_delay_s)
+        bank, history, source, recorder = _run(first_frames, width, height, pixel_size_mm, options, front_end,
+                                               initial, max_frames, each_frame, line_delay_s, record=bundle)
         mean = np.asarray(bank.calibration_mean)
         runs = []
         if checking and bank.num_gaussians == 1:
@@ -329,27 +452,42 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
                 def restart_frame(k, running, report, offset=done, f0=f0):
                     bar.update(offset + k + 1, f"restart from f {f0:.0f} px: {running.calibration_mean[0]:.1f}")
 
-                single, _, _ = _run(factory(), width, height, pixel_size_mm, options, fe_options, one, max_frames,
+                single, _, _, _ = _run(factory(), width, height, pixel_size_mm, options, fe_options, one, max_frames,
                                     restart_frame, line_delay_s)
                 runs.append(Restart(f0=f0, mean=np.asarray(single.calibration_mean),
                                     bounds_99=np.asarray(single.calibration_bounds_99())))
                 done += len(history)
+        bundled = None, None, ""
+        if bundle:
+            bar.update(len(history), "bundle adjustment over the filter's tracks")
+            bundled = _bundle(recorder, mean, pixel_size_mm, len(history))
     warnings = []
     if bank.num_gaussians > 1:
-        warnings.append(f"{bank.num_gaussians} Gaussians remain: the sequence did not single out one calibration "
+        warnings.append(f"{bank.num_gaussians} Gaussians remain in the filter bank: the sequence did not single out "
+                        "one calibration for the filter "
                         "(move more, with rotation and translation, through a textured scene)")
     used = np.median(history.features_used)
     if used < 0.5 * source.options.min_visible:
         warnings.append(f"few features matched per frame (median {used:.0f}); the scene may lack texture")
     filter_bounds = np.asarray(bank.calibration_bounds_99())
-    determined, reason, bounds = judge_determined(mean, filter_bounds, bank.num_gaussians, runs, (width, height),
-                                                  _prior_bounds(initial, (width, height)))
+    prior = _prior_bounds(initial, (width, height))
+    covariance = np.asarray(bank.calibration_cov)
+    ba, cut, ba_error, estimate, estimate_from = None, None, "", mean, "filter"
+    if bundle:
+        ba, cut, ba_error = bundled
+        determined, reason, bounds = judge_bundle(ba, cut, ba_error, prior, max_f_half_width)
+        if ba is not None:
+            estimate, estimate_from, covariance = ba.camera, "bundle adjustment", bundle_covariance(ba, cut)
+    else:
+        determined, reason, bounds = judge_determined(mean, filter_bounds, bank.num_gaussians, runs,
+                                                      (width, height), prior)
     return SelfCalibResult(
-        mean=mean, bounds_99=bounds,
-        covariance=np.asarray(bank.calibration_cov), image_size=(width, height),
+        mean=np.asarray(estimate, float), bounds_99=bounds,
+        covariance=covariance, image_size=(width, height),
         pixel_size_mm=tuple(float(x) for x in np.broadcast_to(np.asarray(pixel_size_mm, float).reshape(-1), (2,))),
         gaussians_initial=len(initial), gaussians_left=bank.num_gaussians, history=history, warnings=warnings,
-        determined=determined, reason=reason, filter_bounds_99=filter_bounds, restarts=runs)
+        determined=determined, reason=reason, filter_bounds_99=filter_bounds, restarts=runs, filter_mean=mean,
+        bundle=ba, bundle_cut=cut if bundle else None, bundle_error=ba_error, estimate_from=estimate_from)
 
 
 def civera_to_opencv(camera: _core.CameraModel, samples: int = 40) -> tuple[_core.CameraModel, float]:

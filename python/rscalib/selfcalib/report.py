@@ -62,8 +62,9 @@ def _readable_limits(mean: np.ndarray, lo: np.ndarray, hi: np.ndarray, extra=())
 
 def plot_history(result: SelfCalibResult, path: Path) -> None:
     """The five estimates with the bank's 99 % bounds per frame (f on its own large panel, its axis
-    fitted to the band), the frame where the bank collapsed to one Gaussian, the restarts'
-    estimates and the reported bounds at the end, the number of Gaussians, and the verdict."""
+    fitted to the band), the frame where the bank collapsed to one Gaussian, at the end the restarts'
+    estimates, the bundle adjustment with its bounds and the reported estimate and bounds, the
+    number of Gaussians, and the verdict."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -84,7 +85,14 @@ def plot_history(result: SelfCalibResult, path: Path) -> None:
             ax.plot([last] * len(ends), ends, "k>", ms=6, label="restarts (end)")
         rep = result.bounds_99[i]
         ax.vlines([last], rep[0], rep[1], color="C3", lw=3, label="reported 99 % bounds")
-        ax.plot([last], [result.mean[i]], "o", color="C3")
+        ax.plot([last], [result.mean[i]], "o", color="C3", label=f"reported ({result.estimate_from})")
+        if result.bundle is not None:   # the adjustment's own bounds, also when the prior's are reported
+            b_lo, b_hi = result.bundle_bounds_99()[i]
+            x_ba = last + 0.02 * max(last, 1)
+            ax.errorbar([x_ba], [result.bundle.camera[i]], yerr=[[result.bundle.camera[i] - b_lo],
+                        [b_hi - result.bundle.camera[i]]], fmt="D", color="C2", ms=4, capsize=3,
+                        label="bundle adjustment, 99 %")
+            ends = [*ends, b_lo, b_hi]
         if collapse is not None:
             ax.axvline(collapse, color="0.4", ls="--", lw=0.8, label="one Gaussian left" if i == 0 else None)
         if result.determined:
@@ -101,7 +109,7 @@ def plot_history(result: SelfCalibResult, path: Path) -> None:
     axes[5].set_xlabel("frame")
     m, b = result.mean, result.bounds_99
     verdict = {True: "DETERMINED", False: "NOT DETERMINED", None: "NOT CHECKED"}[result.determined]
-    title = (f"{verdict}: f {m[0]:.1f} px, reported 99 % [{b[0, 0]:.1f}, {b[0, 1]:.1f}]"
+    title = (f"{verdict}: f {m[0]:.1f} px ({result.estimate_from}), reported 99 % [{b[0, 0]:.1f}, {b[0, 1]:.1f}]"
              + (f"; one Gaussian from frame {collapse}" if collapse is not None else ""))
     fig.suptitle(title + "\n" + textwrap.fill(result.reason, 110), fontsize=9)
     fig.tight_layout()

@@ -26,7 +26,7 @@ pytest.importorskip("distributed")
 PACKAGE_PARENT = Path(rscalib.__file__).resolve().parents[1]
 ANSWERED = ("ok", "not_trusted", "undetermined", "bad_input")
 # result.json entries that differ between two runs of the same command: clocks and cache hits
-VOLATILE = ("provenance", "created_utc", "frames_per_s", "detections_from_cache", "from_cache")
+VOLATILE = ("provenance", "created_utc", "frames_per_s", "elapsed_s", "detections_from_cache", "from_cache")
 VICTIM = "ld-30fps-1"  # the job killed midway (first row: it starts first)
 
 

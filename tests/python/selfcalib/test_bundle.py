@@ -80,3 +80,63 @@ def test_schur_complement_matches_a_dense_inverse(run, max_track_frames):
     dense = np.linalg.inv(normal.toarray())[:, :5]
     columns = bundle_module._camera_columns_of_inverse(problem, normal)
     np.testing.assert_allclose(columns[:5], dense[:5], rtol=1e-6, atol=1e-9 * np.abs(dense[:5]).max())
+
+
+def test_levenberg_marquardt_finish_reaches_scipys_converged_minimum(run):
+    """Three TRF evaluations and the exact LM finish land where SciPy's TRF run to convergence lands."""
+    filter_mean, tracks = run
+    quick = bundle_adjust(tracks, filter_mean, PAPER_PIXEL_SIZE_MM, max_nfev=3)
+    full = bundle_adjust(tracks, filter_mean, PAPER_PIXEL_SIZE_MM, max_nfev=3000, ftol=1e-14, polish_steps=0)
+    sigma = np.sqrt(np.diag(full.covariance))
+    assert quick.extra["polish_steps"] > 0
+    assert quick.step_sigma < 0.1
+    np.testing.assert_array_less(np.abs(quick.camera - full.camera), 0.1 * sigma)
+    # the clustered covariances are positive semi-definite and at least as wide as the model's here
+    for cov in (quick.covariance_tracks, quick.covariance_clustered):
+        assert np.linalg.eigvalsh(cov).min() >= -1e-12 * np.abs(cov).max()
+    assert np.all(np.diag(quick.covariance_clustered) > 0)
+
+
+def _fake_bundle(camera, half_width, points=60, status=1, step_sigma=0.0):
+    from rscalib.selfcalib.bundle import BundleResult
+
+    camera = np.asarray(camera, float)
+    sigma = np.asarray(half_width, float) / 2.5758293035489004
+    cov = np.diag(sigma ** 2)
+    bounds = np.c_[camera - half_width, camera + half_width]
+    return BundleResult(camera=camera, covariance=cov, bounds_99=bounds, covariance_tracks=cov, bounds_99_tracks=bounds,
+                        sigma_px=0.2, keyframes=60, points=points, observations=1000, inlier_fraction=1.0, rms_px=0.2,
+                        nfev=10, status=status, message="", elapsed_s=0.1, start=camera, step_sigma=step_sigma,
+                        covariance_clustered=cov, bounds_99_clustered=bounds)
+
+
+def test_determined_needs_a_narrow_f_with_the_drift_shift_included():
+    from rscalib.selfcalib.calibrate import judge_bundle
+
+    prior = np.array([[80.0, 630.0], [140.0, 180.0], [100.0, 140.0], [-0.1, 0.1], [-0.01, 0.03]])
+    camera = [194.0, 160.0, 120.0, 0.06, 0.014]
+    half = np.array([1.0, 1.0, 1.0, 1e-3, 1e-4])
+    ba = _fake_bundle(camera, half)
+    same = _fake_bundle(camera, half)
+    determined, reason, bounds = judge_bundle(ba, same, "", prior)
+    assert determined and "clustered" in reason
+    np.testing.assert_allclose(bounds[:, 1] - bounds[:, 0], 2 * half)
+    # the pieces' adjustment 3 px away: the shift counts as one more standard error, and f is no
+    # longer known to 2 %
+    shifted = _fake_bundle([197.0, *camera[1:]], half)
+    determined, reason, bounds = judge_bundle(ba, shifted, "", prior)
+    assert not determined and "pin f only" in reason
+    np.testing.assert_allclose(bounds, prior)           # the prior's, which contain the estimate
+    wide_enough = judge_bundle(ba, shifted, "", prior, max_f_half_width=0.05)
+    assert wide_enough[0]
+    np.testing.assert_allclose(wide_enough[2][0, 1] - 194.0, 2.5758293035489004 * np.hypot(1 / 2.5758293035489004, 3))
+    # too few tracks, not converged, no drift check, no adjustment: not determined, with the reason
+    assert "feature tracks" in judge_bundle(_fake_bundle(camera, half, points=12), same, "", prior)[1]
+    assert "did not converge" in judge_bundle(_fake_bundle(camera, half, status=0, step_sigma=0.5), same, "",
+                                              prior)[1]
+    assert judge_bundle(_fake_bundle(camera, half, status=0, step_sigma=0.05), same, "", prior)[0]
+    assert "drift check" in judge_bundle(ba, None, "only 3 features", prior)[1]
+    assert not judge_bundle(None, None, "no tracks", prior)[0]
+    # an estimate outside the prior widens the reported bounds to include it
+    far = _fake_bundle([700.0, *camera[1:]], np.array([100.0, 1, 1, 1e-3, 1e-4]))
+    assert judge_bundle(far, far, "", prior)[2][0, 1] == 700.0

@@ -98,6 +98,12 @@ def test_selfcalib_cli_recovers_the_focal_length(room_sequence, tmp_path):
         assert lo <= result[name] <= hi
     assert result["frames_processed"] == 150
     assert result["gaussians_left"] < 108
+    # the bundle adjustment over the filter's tracks is the estimate; its bounds hold the truth
+    assert result["estimate_from"] == "bundle adjustment" and result["bundle"]["f"] == result["f"]
+    assert result["determined"] is (proc.returncode == 0)
+    for name, value in zip(("f", "cx", "cy", "k1", "k2"), truth):
+        lo, hi = result["bundle_bounds_99"][("f", "cx", "cy", "k1", "k2").index(name)]
+        assert lo <= value <= hi, (name, value, lo, hi)
     assert len(result["history"]["gaussians"]) == 150
     assert result["provenance"]["command"] == "selfcalib" and result["bank"] == "sog"
     assert (tmp_path / "res" / "history.png").stat().st_size > 0
