@@ -466,6 +466,10 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
         warnings.append(f"{bank.num_gaussians} Gaussians remain in the filter bank: the sequence did not single out "
                         "one calibration for the filter "
                         "(move more, with rotation and translation, through a textured scene)")
+    if bundle and line_delay_s == 0:
+        warnings.append("the rolling shutter is not compensated (no line delay given): on a phone or other "
+                        "rolling-shutter camera give the line delay (`rscalib linedelay`; --line-delay): without it "
+                        "the bounds do not cover the shutter's error, largest when looking around (docs/sog.md §20)")
     used = np.median(history.features_used)
     if used < 0.5 * source.options.min_visible:
         warnings.append(f"few features matched per frame (median {used:.0f}); the scene may lack texture")
