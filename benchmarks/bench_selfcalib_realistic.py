@@ -100,6 +100,9 @@ def run_one(style: str, size: tuple[int, int], seed: int, frames: int, cache: st
             row["inside_bundle"] = {n: bool(bb[n][0] <= row["truth"][n] <= bb[n][1]) for n in NAMES}
             row["bundle_f_half_width_pct"] = 50.0 * (bb["f"][1] - bb["f"][0]) / ba["f"]
             row["bundle_s"] = ba["elapsed_s"]
+            if ba.get("line_delay_s") is not None:   # estimated by the adjustment (no --line-delay)
+                row["line_delay_s"] = {"truth": float(truth["line_delay_s"]), "bundle": ba["line_delay_s"],
+                                       "bounds_99": ba["line_delay_bounds_99_s"]}
     return row
 
 
@@ -226,7 +229,9 @@ def main() -> None:
                   f"determined {row.get('determined')} inside {sum(row.get('inside', {}).values())}/5 "
                   f"BA-inside {sum(row.get('inside_bundle', {}).values())}/5 "
                   f"hw {row.get('bundle_f_half_width_pct', float('nan')):.2f} % {row['wall_s']} s "
-                  f"{row.get('peak_rss_mb')} MB", flush=True)
+                  f"{row.get('peak_rss_mb')} MB"
+                  + (f" d {1e6 * row['line_delay_s']['bundle']:.1f} us/row (truth {1e6 * row['line_delay_s']['truth']:.1f})"
+                     if "line_delay_s" in row else ""), flush=True)
             doc = write(args, rows, started, len(jobs))  # after every run: a partial result survives
     print(json.dumps(doc["summary"], indent=1))
 

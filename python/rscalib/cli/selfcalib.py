@@ -27,7 +27,8 @@ def add_parser(sub) -> None:
     p.add_argument("--line-delay", type=number(0.0, 1e-3, " s/row"), default=0.0, metavar="S_PER_ROW",
                    help="the camera's rolling-shutter line delay in s/row (e.g. `rscalib linedelay`'s "
                         "line_delay_s): every measurement is moved to one time per frame (docs/sog.md §18); "
-                        "default 0: treated as a global shutter")
+                        "default 0: the bundle adjustment estimates it from the tracks (docs/sog.md §21; "
+                        "with --no-bundle: treated as a global shutter)")
     p.add_argument("--f-range", type=FOCAL_PX, nargs=2, default=None, metavar=("LO", "HI"),
                    help="focal lengths in px the candidates start from (default: a wide range for the image size)")
     advanced = p.add_argument_group("advanced (baselines and tuning for experiments; the defaults are the method)")
@@ -119,6 +120,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"{result.estimate_from} (in camera.yaml): f {m[0]:.2f} px [{b[0, 0]:.2f}, {b[0, 1]:.2f}], "
           f"cx {m[1]:.2f} [{b[1, 0]:.2f}, {b[1, 1]:.2f}], cy {m[2]:.2f} [{b[2, 0]:.2f}, {b[2, 1]:.2f}], "
           f"k1 {m[3]:.5f} mm^-2, k2 {m[4]:.5f} mm^-4 (reported 99 % bounds)")
+    line_delay = result.line_delay_estimate()
+    if line_delay is not None:
+        d, (lo, hi) = line_delay
+        print(f"line delay estimated with it (no --line-delay given): {1e6 * d:.2f} us/row "
+              f"[{1e6 * lo:.2f}, {1e6 * hi:.2f}] (99 %; `rscalib linedelay` on a target video measures it better)")
     print(f"OpenCV camera: {written.camera_yaml} (within {written.opencv_max_difference_px:.3f} px of the "
           "civera-radial model)")
     if result.determined:

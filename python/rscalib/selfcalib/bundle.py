@@ -1,11 +1,13 @@
-"""Batch bundle adjustment over the tracks of a self-calibration run (issue 11, an experiment).
+"""Batch bundle adjustment over the tracks of a self-calibration run (issue 11; docs/sog.md §17, §20, §21).
 
 The SOG bank (docs/sog.md) is the online engine; this refines its answer offline: one shared
 civera-radial camera ``[f, cx, cy, k1 (mm^-2), k2 (mm^-4)]`` (the filter's parameterisation,
 docs/conventions.md), one pose per keyframe and one 3-D point per feature, fitted to the pixels
 the filter used (its RANSAC/gate inliers) by SciPy's ``least_squares`` with a robust loss, a sparse
-analytic Jacobian and ``x_scale='jac'``. The intrinsics' covariance is (Jᵀ W J)⁻¹ times the
-residual variance (W: the robust loss's weights at the solution).
+analytic Jacobian and ``x_scale='jac'``, finished by exact Levenberg-Marquardt steps. Optionally the
+rolling shutter's line delay is a sixth shared parameter: each observation is predicted at its row's
+time through its track's image velocity (§21). Covariances: the model's, clustered by track, and
+clustered by track and keyframe (what `rscalib selfcalib` reports, with the drift term of §20).
 
 - :class:`TrackRecorder` wraps any measurement source of :func:`rscalib.selfcalib.driver.run_bank`
   and, through its ``on_frame`` hook, keeps per frame the used measurements, the bank's merged
@@ -15,7 +17,6 @@ residual variance (W: the robust loss's weights at the solution).
 Gauge: the first keyframe's pose is held at the filter's (the filter's world is the first
 camera), and the scale by holding the world z of the point seen most often in that keyframe.
 Poses are ``x_c = R_i X + p_i`` with ``R_i = exp([θ_i]×) R0_i`` (θ_i the unknown, R0_i the start).
-Not wired into the CLI: docs/sog.md §16 says what it is measured against.
 """
 from __future__ import annotations
 
@@ -32,12 +33,15 @@ from scipy.spatial.transform import Rotation
 
 from .. import _core
 from ..errors import InputError
+from .rolling_shutter import MAX_GAP_FRAMES
 
 __all__ = ["BundleProblem", "BundleResult", "FeatureTracks", "TrackRecorder", "build_problem", "bundle_adjust", "project_civera",
            "residuals_and_jacobian"]
 
 _Z99 = 2.5758293035489004
-_CAMERA_SIZE = 5
+_CAMERA_SIZE = 5      # f, cx, cy, k1, k2
+_GLOBAL_SIZE = 6      # the camera and the line delay (µs/row), shared by every observation
+_US = 1e-6
 _POSE_SIZE = 6
 _POINT_SIZE = 3
 
@@ -50,7 +54,8 @@ _POINT_SIZE = 3
 class FeatureTracks:
     """What the filter used: observations (``frame`` (N,), ``feature_id`` (N,), ``uv`` (N, 2)
     distorted pixels), per processed frame its merged pose ``R_cw`` / ``p_cw`` (dicts frame -> (3, 3),
-    (3,)), and per feature the latest point of the leading filter in its world (``points``, id -> (3,))."""
+    (3,)), and per feature the latest point of the leading filter in its world (``points``, id -> (3,));
+    ``t_s``: per processed frame its time (dict frame -> s; None: not recorded)."""
 
     frame: np.ndarray
     feature_id: np.ndarray
@@ -58,6 +63,7 @@ class FeatureTracks:
     R_cw: dict
     p_cw: dict
     points: dict
+    t_s: Optional[dict] = None
 
     def __len__(self) -> int:
         return len(self.frame)
@@ -65,10 +71,16 @@ class FeatureTracks:
 
 class TrackRecorder:
     """A measurement source around ``source`` that records what the bank used. Pass it to
-    ``run_bank`` as the source and its :meth:`on_frame` as ``on_frame``; then :meth:`tracks`."""
+    ``run_bank`` as the source and its :meth:`on_frame` as ``on_frame``; then :meth:`tracks`.
+    timed: the frames are ``rolling_shutter.TimedFrame`` (their times are recorded, for the line
+    delay); ``unwrap``: hand ``source`` the bare image (a source that does not take timed frames)."""
 
-    def __init__(self, source: Any) -> None:
+    def __init__(self, source: Any, timed: bool = False, unwrap: bool = False) -> None:
         self.source = source
+        self._timed = bool(timed or unwrap)
+        self._unwrap = bool(unwrap)
+        self._t_frame: Optional[float] = None
+        self._t_s: dict = {}
         self._last: tuple[np.ndarray, np.ndarray] = (np.zeros(0, np.int64), np.zeros((0, 2)))
         self._new: list[tuple[np.ndarray, np.ndarray]] = []
         self._rows: list[tuple[int, np.ndarray, np.ndarray]] = []
@@ -80,8 +92,14 @@ class TrackRecorder:
     def options(self) -> Any:
         return self.source.options
 
+    def _frame(self, frame: Any) -> Any:
+        if not self._timed:
+            return frame
+        self._t_frame = float(frame.t_s)
+        return frame.image if self._unwrap else frame
+
     def measure(self, frame: Any, ids: np.ndarray, uv_pred: np.ndarray, cov: np.ndarray):
-        uv, found = self.source.measure(frame, ids, uv_pred, cov)
+        uv, found = self.source.measure(self._frame(frame), ids, uv_pred, cov)
         self._last = (np.asarray(ids, np.int64).copy(), np.asarray(uv, float).copy())
         return uv, found
 
@@ -89,10 +107,10 @@ class TrackRecorder:
         self.source.forget(feature_ids)
 
     def new_features(self, frame: Any, count: int, search: Any) -> np.ndarray:
-        return self.source.new_features(frame, count, search)
+        return self.source.new_features(self._frame(frame), count, search)
 
     def track(self, frame: Any, feature_ids: np.ndarray, uv: np.ndarray) -> None:
-        self.source.track(frame, feature_ids, uv)
+        self.source.track(self._frame(frame), feature_ids, uv)
         self._new.append((np.asarray(feature_ids, np.int64).copy(), np.asarray(uv, float).copy()))
 
     def on_frame(self, k: int, bank: _core.SogBank, report: _core.SogUpdateReport) -> None:
@@ -103,6 +121,8 @@ class TrackRecorder:
             self._rows.append((k, new_ids, new_uv))
         self._new = []
         self._last = (np.zeros(0, np.int64), np.zeros((0, 2)))
+        if self._t_frame is not None:
+            self._t_s[k] = self._t_frame
         state = np.asarray(bank.camera_state, float)
         R_wc = Rotation.from_quat(np.roll(state[3:7], -1)).as_matrix()   # stored w first
         self._R_cw[k] = R_wc.T
@@ -116,7 +136,8 @@ class TrackRecorder:
             frame=np.concatenate(frames) if frames else np.zeros(0, np.int64),
             feature_id=np.concatenate([ids for _, ids, _ in self._rows]) if frames else np.zeros(0, np.int64),
             uv=np.concatenate([uv for _, _, uv in self._rows]).reshape(-1, 2) if frames else np.zeros((0, 2)),
-            R_cw=dict(self._R_cw), p_cw=dict(self._p_cw), points=dict(self._points))
+            R_cw=dict(self._R_cw), p_cw=dict(self._p_cw), points=dict(self._points),
+            t_s=dict(self._t_s) if self._timed else None)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -196,6 +217,8 @@ class BundleProblem:
     pixel_size_mm: np.ndarray
     free: np.ndarray          # (n_full,) bool
     x_full: np.ndarray        # the start (and the held values)
+    # d uv / d (line delay in µs/row) per observation (N, 2): image velocity (px/s) x (v - v_ref) x 1e-6
+    shutter: Optional[np.ndarray] = None
 
     @property
     def num_poses(self) -> int:
@@ -206,24 +229,31 @@ class BundleProblem:
         return (len(self.x_full) - self.point_offset()) // _POINT_SIZE
 
     def pose_offset(self) -> int:
-        return _CAMERA_SIZE
+        return _GLOBAL_SIZE
 
     def point_offset(self) -> int:
-        return _CAMERA_SIZE + _POSE_SIZE * self.num_poses
+        return _GLOBAL_SIZE + _POSE_SIZE * self.num_poses
+
+    @property
+    def estimates_line_delay(self) -> bool:
+        return bool(self.free[_CAMERA_SIZE])
 
     def unpack(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The globals ``[f, cx, cy, k1, k2, line delay µs/row]``, θ (K, 3), p (K, 3), points (P, 3)."""
         full = self.x_full.copy()
         full[self.free] = x
-        poses = full[_CAMERA_SIZE:self.point_offset()].reshape(-1, _POSE_SIZE)
-        return full[:_CAMERA_SIZE], poses[:, :3], poses[:, 3:], full[self.point_offset():].reshape(-1, 3)
+        poses = full[_GLOBAL_SIZE:self.point_offset()].reshape(-1, _POSE_SIZE)
+        return full[:_GLOBAL_SIZE], poses[:, :3], poses[:, 3:], full[self.point_offset():].reshape(-1, 3)
 
 
 def residuals_and_jacobian(problem: BundleProblem, x: np.ndarray, jacobian: bool = True
                            ) -> tuple[np.ndarray, Optional[scipy.sparse.csr_matrix]]:
     """Residuals (2N,) = predicted − measured pixels, and their sparse Jacobian in the free
-    parameters (2N, n_free) (None when ``jacobian`` is False)."""
+    parameters (2N, n_free) (None when ``jacobian`` is False). The prediction is at the keyframe's
+    time plus the rolling shutter's shift, image velocity × (v − v_ref) × line delay (docs/sog.md §21)."""
     camera, theta, p, X = problem.unpack(x)
-    f, cx, cy, k1, k2 = camera
+    f, cx, cy, k1, k2, line_delay_us = camera
+    shutter = problem.shutter if problem.shutter is not None else np.zeros((len(problem.uv), 2))
     dx, dy = problem.pixel_size_mm
     R = Rotation.from_rotvec(theta).as_matrix() @ problem.R0                 # (K, 3, 3)
     Ri = R[problem.obs_pose]
@@ -233,7 +263,7 @@ def residuals_and_jacobian(problem: BundleProblem, x: np.ndarray, jacobian: bool
     nrm = h[:, :2] / z[:, None]
     a = f * nrm
     delta = _distort_offsets(a, k1, k2, np.array([dx, dy]))
-    res = (np.array([cx, cy]) + delta - problem.uv).ravel()
+    res = (np.array([cx, cy]) + delta + line_delay_us * shutter - problem.uv).ravel()
     if not jacobian:
         return res, None
     # J_U = dU/dδ = g I + 2 g' δ wᵀ, U(δ) = δ g(r²), w = (dx² δu, dy² δv) (docs/sog.md §5)
@@ -252,14 +282,15 @@ def residuals_and_jacobian(problem: BundleProblem, x: np.ndarray, jacobian: bool
     d_h_d_theta = -_skew(RX) @ _left_jacobian_so3(theta)[problem.obs_pose]
     blocks = np.concatenate([
         d_uv_d_f[:, :, None], np.broadcast_to(np.eye(2), (len(h), 2, 2)), d_uv_d_k,   # camera
+        shutter[:, :, None],                                                         # line delay
         d_uv_d_h @ d_h_d_theta, d_uv_d_h,                                            # pose: θ, p
         d_uv_d_h @ Ri,                                                               # point
-    ], axis=2)                                                                       # (N, 2, 14)
+    ], axis=2)                                                                       # (N, 2, 15)
     pose0 = problem.pose_offset() + _POSE_SIZE * problem.obs_pose
     point0 = problem.point_offset() + _POINT_SIZE * problem.obs_point
-    cols_full = np.concatenate([np.broadcast_to(np.arange(_CAMERA_SIZE), (len(h), _CAMERA_SIZE)),
+    cols_full = np.concatenate([np.broadcast_to(np.arange(_GLOBAL_SIZE), (len(h), _GLOBAL_SIZE)),
                                 pose0[:, None] + np.arange(_POSE_SIZE), point0[:, None] + np.arange(_POINT_SIZE)],
-                               axis=1)                                               # (N, 14)
+                               axis=1)                                               # (N, 15)
     column = np.cumsum(problem.free) - 1
     column[~problem.free] = -1
     cols = np.broadcast_to(column[cols_full][:, None, :], blocks.shape)
@@ -302,6 +333,11 @@ class BundleResult:
     covariance_clustered: Optional[np.ndarray] = None
     bounds_99_clustered: Optional[np.ndarray] = None
     extra: dict = field(default_factory=dict)
+    # the rolling shutter's line delay (s/row) when estimated (else None), its clustered 99 % bounds,
+    # and the globals' clustered covariance (6, 6): the camera then the line delay in µs/row
+    line_delay_s: Optional[float] = None
+    line_delay_bounds_99_s: Optional[np.ndarray] = None
+    covariance_globals: Optional[np.ndarray] = None
 
     def summary_dict(self) -> dict:
         names = ("f", "cx", "cy", "k1", "k2")
@@ -318,23 +354,62 @@ class BundleResult:
                    inlier_fraction=self.inlier_fraction, rms_px=self.rms_px, nfev=self.nfev, status=self.status,
                    message=self.message, elapsed_s=self.elapsed_s, start=self.start.tolist(),
                    step_sigma=self.step_sigma, **self.extra)
+        if self.line_delay_s is not None:
+            out.update(line_delay_s=float(self.line_delay_s),
+                       line_delay_bounds_99_s=[float(b) for b in self.line_delay_bounds_99_s])
         return out
 
 
+def track_velocity(tracks: FeatureTracks) -> np.ndarray:
+    """Each observation's image velocity (N, 2) px/s from its track's neighbouring observations
+    (central difference, else one-sided; neighbours at most MAX_GAP_FRAMES frame intervals away);
+    NaN where the track has no such neighbour or the times were not recorded."""
+    velocity = np.full((len(tracks), 2), np.nan)
+    if tracks.t_s is None or len(tracks) == 0:
+        return velocity
+    t = np.array([tracks.t_s.get(int(k), np.nan) for k in tracks.frame.tolist()])
+    order = np.lexsort((tracks.frame, tracks.feature_id))
+    fid, tt, uv = tracks.feature_id[order], t[order], tracks.uv[order]
+    times = np.unique(t[np.isfinite(t)])
+    steps = np.diff(times)
+    interval = float(np.median(steps[steps > 0])) if np.any(steps > 0) else np.inf
+    max_gap = MAX_GAP_FRAMES * interval * 1.5     # 1.5: the frame times jitter about their median
+    n = len(fid)
+    before, after = np.maximum(np.arange(n) - 1, 0), np.minimum(np.arange(n) + 1, n - 1)
+    dt_before, dt_after = tt - tt[before], tt[after] - tt
+    has_before = (fid[before] == fid) & (dt_before > 0) & (dt_before <= max_gap)
+    has_after = (fid[after] == fid) & (dt_after > 0) & (dt_after <= max_gap)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        central = (uv[after] - uv[before]) / (tt[after] - tt[before])[:, None]
+        backward = (uv - uv[before]) / dt_before[:, None]
+        forward = (uv[after] - uv) / dt_after[:, None]
+    sorted_velocity = np.where((has_before & has_after)[:, None], central,
+                               np.where(has_before[:, None], backward,
+                                        np.where(has_after[:, None], forward, np.nan)))
+    velocity[order] = sorted_velocity
+    return velocity
+
+
 def build_problem(tracks: FeatureTracks, camera0: np.ndarray, pixel_size_mm: np.ndarray, keyframe_step: int,
-                   min_views: int, max_track_frames: Optional[int] = None) -> BundleProblem:
+                  min_views: int, max_track_frames: Optional[int] = None, line_delay: bool = False,
+                  reference_row: Optional[float] = None) -> BundleProblem:
     """The adjustment's problem: observations of features seen in >= ``min_views`` keyframes (every
     ``keyframe_step``-th recorded frame), started from ``camera0`` and the filter's poses and points,
     with the gauge held (module docstring); tracks cut into points of at most ``max_track_frames``
-    frames each (None: whole tracks)."""
+    frames each (None: whole tracks). line_delay: estimate the rolling shutter's line delay too
+    (needs the tracks' times), with rows timed from ``reference_row`` (None: camera0's cy)."""
     frames = np.array(sorted(tracks.R_cw))
     keyframes = frames[::keyframe_step]
     key_index = {int(k): i for i, k in enumerate(keyframes)}
+    if line_delay and tracks.t_s is None:
+        raise InputError("bundle adjustment: the line delay needs the tracks' frame times")
+    velocity_all = track_velocity(tracks) if line_delay else np.zeros((len(tracks), 2))
     on_key = np.isin(tracks.frame, keyframes) & np.isin(tracks.feature_id, list(tracks.points))
-    fid, frame, uv = tracks.feature_id[on_key], tracks.frame[on_key], tracks.uv[on_key]
+    fid, frame, uv, velocity = (tracks.feature_id[on_key], tracks.frame[on_key], tracks.uv[on_key],
+                                velocity_all[on_key])
     # one observation per (feature, keyframe): the first
     _, first = np.unique(np.c_[fid, frame], axis=0, return_index=True)
-    fid, frame, uv = fid[first], frame[first], uv[first]
+    fid, frame, uv, velocity = fid[first], frame[first], uv[first], velocity[first]
     R0 = np.array([tracks.R_cw[int(k)] for k in keyframes])
     p0 = np.array([tracks.p_cw[int(k)] for k in keyframes])
     pose_of = np.array([key_index[int(k)] for k in frame], dtype=np.int64)
@@ -343,7 +418,7 @@ def build_problem(tracks: FeatureTracks, camera0: np.ndarray, pixel_size_mm: np.
     X = np.array([points[int(i)] for i in fid]).reshape(-1, 3)
     depth = np.einsum("nij,nj->ni", R0[pose_of], X)[:, 2] + p0[pose_of, 2]
     ok = depth > 1e-3
-    fid, frame, pose_of, uv = fid[ok], frame[ok], pose_of[ok], uv[ok]
+    fid, frame, pose_of, uv, velocity = fid[ok], frame[ok], pose_of[ok], uv[ok], velocity[ok]
     # a track longer than max_track_frames becomes several points: the front end's match drifts
     # with the age of its patch (docs/sog.md §1), and a fresh point absorbs the offset so far
     segment = np.zeros(len(fid), np.int64)
@@ -356,31 +431,41 @@ def build_problem(tracks: FeatureTracks, camera0: np.ndarray, pixel_size_mm: np.
     point_of = point_of.reshape(-1)
     keep = counts >= min_views
     ok = keep[point_of]
-    fid, pose_of, uv = fid[ok], pose_of[ok], uv[ok]
+    fid, pose_of, uv, velocity = fid[ok], pose_of[ok], uv[ok], velocity[ok]
     point_of = (np.cumsum(keep) - 1)[point_of[ok]]
     keep_ids = pairs[keep, 0]
     if len(keep_ids) < 10:
         raise InputError(f"bundle adjustment: only {len(keep_ids)} features seen in >= {min_views} keyframes")
     X0 = np.array([points[int(i)] for i in keep_ids])
-    x_full = np.concatenate([np.asarray(camera0, float), np.c_[np.zeros((len(keyframes), 3)), p0].ravel(), X0.ravel()])
+    camera0 = np.asarray(camera0, float)[:_CAMERA_SIZE]
+    x_full = np.concatenate([camera0, [0.0], np.c_[np.zeros((len(keyframes), 3)), p0].ravel(), X0.ravel()])
     free = np.ones(len(x_full), bool)
-    free[_CAMERA_SIZE:_CAMERA_SIZE + _POSE_SIZE] = False          # the first keyframe's pose
+    free[_CAMERA_SIZE] = bool(line_delay)
+    shutter = None
+    if line_delay:   # a track without a velocity (too short, a gap) is taken as still
+        v_ref = float(camera0[2]) if reference_row is None else float(reference_row)
+        shutter = np.nan_to_num(velocity) * ((uv[:, 1] - v_ref) * _US)[:, None]
+        if not np.any(shutter):   # nothing moves: the line delay is not observed
+            free[_CAMERA_SIZE], shutter = False, None
+    free[_GLOBAL_SIZE:_GLOBAL_SIZE + _POSE_SIZE] = False          # the first keyframe's pose
     in_first = point_of[pose_of == 0]
     if len(in_first) == 0:
         raise InputError("bundle adjustment: no feature seen in the first keyframe (scale gauge)")
     anchor = np.bincount(point_of, minlength=len(keep_ids))[in_first].argmax()
-    free[_CAMERA_SIZE + _POSE_SIZE * len(keyframes) + _POINT_SIZE * in_first[anchor] + 2] = False  # its z
+    free[_GLOBAL_SIZE + _POSE_SIZE * len(keyframes) + _POINT_SIZE * in_first[anchor] + 2] = False  # its z
     return BundleProblem(obs_pose=pose_of, obs_point=point_of, uv=uv, R0=R0, pixel_size_mm=pixel_size_mm, free=free,
-                    x_full=x_full)
+                         x_full=x_full, shutter=shutter)
 
 
 def _camera_columns_of_inverse(problem: BundleProblem, H: scipy.sparse.csr_matrix) -> np.ndarray:
-    """H⁻¹ E_camera (n, 5) of the normal matrix H (n, n) through the Schur complement of the points
+    """H⁻¹ E_globals (n, g) of the normal matrix H (n, n), g the free globals (the camera and, when
+    estimated, the line delay), through the Schur complement of the points
     (block diagonal, one block per point): S = A − B C⁻¹ Bᵀ over the camera and poses, then
     H⁻¹ E = [S⁻¹ E; −C⁻¹ Bᵀ S⁻¹ E]. Jacobi-scaled first; pseudo-inverses where singular."""
     scale = 1.0 / np.sqrt(np.maximum(H.diagonal(), 1e-300))
     Hs = (scipy.sparse.diags(scale) @ H @ scipy.sparse.diags(scale)).tocsr()
-    na = problem.point_offset() - _POSE_SIZE                      # free camera and pose columns
+    na = int(problem.free[:problem.point_offset()].sum())          # free global and pose columns
+    ng = int(problem.free[:_GLOBAL_SIZE].sum())
     block = np.repeat(np.arange(problem.num_points), _POINT_SIZE)[problem.free[problem.point_offset():]]
     size = np.bincount(block, minlength=problem.num_points)
     first = np.r_[0, np.cumsum(size)[:-1]]
@@ -399,8 +484,8 @@ def _camera_columns_of_inverse(problem: BundleProblem, H: scipy.sparse.csr_matri
     C_inv = scipy.sparse.csr_matrix((data, (rows, cols)), shape=(len(block), len(block)))
     B = Hs[:na, na:]
     S = Hs[:na, :na].toarray() - (B @ C_inv @ B.T).toarray()
-    rhs = np.zeros((na, _CAMERA_SIZE))
-    rhs[:_CAMERA_SIZE] = np.diag(scale[:_CAMERA_SIZE])            # the camera is always free and first
+    rhs = np.zeros((na, ng))
+    rhs[:ng] = np.diag(scale[:ng])                                 # the free globals come first
     try:
         z_a = scipy.linalg.solve(S, rhs, assume_a="pos")
     except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
@@ -411,28 +496,30 @@ def _camera_columns_of_inverse(problem: BundleProblem, H: scipy.sparse.csr_matri
 
 def _camera_covariance(problem: BundleProblem, x: np.ndarray, loss_scale_px: float
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float, np.ndarray]:
-    """The camera's (5, 5) covariance two ways: from the model, σ² (Jᵀ W J)⁻¹ (independent pixel
+    """The globals' (6, 6) covariance (the camera and the line delay in µs/row; zero rows and columns
+    where held) three ways: from the model, σ² (Jᵀ W J)⁻¹ (independent pixel
     errors), cluster-robust by feature track, H⁻¹ (Σ_j g_j g_jᵀ) H⁻¹ · G / (G − 1) with g_j = J_jᵀ W r_j
     summed over track j (errors correlated along a track, e.g. a patch drifting), and clustered two
     ways, by track and by keyframe (errors shared within a frame too); then the weighted
     residual sigma (px), the fraction of residuals inside the loss scale and the camera's part of the
-    Gauss-Newton step still to go, −(H⁻¹ Jᵀ W r)_camera (5,). W: the soft_l1 weights ρ'(z) =
+    Gauss-Newton step still to go, −(H⁻¹ Jᵀ W r)_globals (6,). W: the soft_l1 weights ρ'(z) =
     (1 + z)^-½, z = (r / scale)²."""
     res, jac = residuals_and_jacobian(problem, x)
     weight = 1.0 / np.sqrt(1.0 + (res / loss_scale_px) ** 2)
     dof = max(len(res) - jac.shape[1], 1)
     sigma2 = float(np.sum(weight * res ** 2) / dof)
     z = _camera_columns_of_inverse(problem, (jac.T @ scipy.sparse.diags(weight) @ jac).tocsr())
-    cov = sigma2 * z[:_CAMERA_SIZE]
-    per_residual = (jac @ z) * (weight * res)[:, None]     # (2N, 5): each residual's share of Zᵀ g
+    ng = z.shape[1]
+    cov = sigma2 * z[:ng]
+    per_residual = (jac @ z) * (weight * res)[:, None]     # (2N, g): each residual's share of Zᵀ g
     tracks = np.repeat(problem.obs_point, 2)
-    per_track = np.zeros((problem.num_points, _CAMERA_SIZE))
+    per_track = np.zeros((problem.num_points, ng))
     np.add.at(per_track, tracks, per_residual)
     count = len(per_track)
     cov_tracks = per_track.T @ per_track * count / max(count - 1, 1)
     # two-way (Cameron, Gelbach & Miller 2011): errors shared by the features of one keyframe (the
     # rolling shutter's shear, timing, blur) as well as along a track: V_track + V_frame - V_observation
-    per_frame = np.zeros((problem.num_poses, _CAMERA_SIZE))
+    per_frame = np.zeros((problem.num_poses, ng))
     np.add.at(per_frame, np.repeat(problem.obs_pose, 2), per_residual)
     frames = len(per_frame)
     per_observation = per_residual[0::2] + per_residual[1::2]
@@ -441,8 +528,15 @@ def _camera_covariance(problem: BundleProblem, x: np.ndarray, loss_scale_px: flo
     values, vectors = np.linalg.eigh(0.5 * (cov_two_way + cov_two_way.T))
     cov_two_way = (vectors * np.maximum(values, 0.0)) @ vectors.T    # clipped to positive semi-definite
     step = -per_residual.sum(axis=0)
-    return (cov, cov_tracks, cov_two_way, float(np.sqrt(sigma2)), float(np.mean(np.abs(res) <= loss_scale_px)),
-            step)
+    free_globals = problem.free[:_GLOBAL_SIZE]
+
+    def globals_sized(a: np.ndarray) -> np.ndarray:
+        out = np.zeros((_GLOBAL_SIZE,) * a.ndim)
+        out[np.ix_(*[free_globals] * a.ndim)] = a
+        return out
+
+    return (globals_sized(cov), globals_sized(cov_tracks), globals_sized(cov_two_way), float(np.sqrt(sigma2)),
+            float(np.mean(np.abs(res) <= loss_scale_px)), globals_sized(step))
 
 
 def _robust_cost(res: np.ndarray, scale: float) -> float:
@@ -485,19 +579,56 @@ def _polish(problem: BundleProblem, x: np.ndarray, loss_scale_px: float, lower: 
     return x, iterations
 
 
+def _depths(problem: BundleProblem, x: np.ndarray) -> np.ndarray:
+    _, theta, p, X = problem.unpack(x)
+    R = Rotation.from_rotvec(theta).as_matrix() @ problem.R0
+    return np.einsum("nij,nj->ni", R[problem.obs_pose], X[problem.obs_point])[:, 2] + p[problem.obs_pose, 2]
+
+
+def _without_points_behind(problem: BundleProblem, x: np.ndarray, min_views: int, min_depth: float = 1e-3
+                           ) -> tuple[BundleProblem, np.ndarray, int]:
+    """The problem without the observations of points that went behind the camera (depth <=
+    ``min_depth``) and without the points then seen fewer than ``min_views`` times (the scale anchor
+    stays): there the clamped projection is not smooth and the solver stalls (a wrong match, or a
+    far point whose depth wandered). Returns the problem, x in it and the number of observations
+    dropped."""
+    behind = _depths(problem, x) <= min_depth
+    if not behind.any():
+        return problem, x, 0
+    full = problem.x_full.copy()
+    full[problem.free] = x
+    n_points = problem.num_points
+    start = problem.point_offset()
+    point_free = problem.free[start:].reshape(n_points, _POINT_SIZE)
+    anchor = ~point_free.all(axis=1)
+    keep_obs = ~behind
+    keep_point = (np.bincount(problem.obs_point[keep_obs], minlength=n_points) >= min_views) | anchor
+    keep_obs &= keep_point[problem.obs_point]
+    new_index = np.cumsum(keep_point) - 1
+    x_full = np.concatenate([full[:start], full[start:].reshape(n_points, _POINT_SIZE)[keep_point].ravel()])
+    free = np.concatenate([problem.free[:start], point_free[keep_point].ravel()])
+    reduced = BundleProblem(obs_pose=problem.obs_pose[keep_obs], obs_point=new_index[problem.obs_point[keep_obs]],
+                            uv=problem.uv[keep_obs], R0=problem.R0, pixel_size_mm=problem.pixel_size_mm, free=free,
+                            x_full=x_full, shutter=None if problem.shutter is None else problem.shutter[keep_obs])
+    return reduced, x_full[free], int(len(keep_obs) - keep_obs.sum())
+
+
 def bundle_adjust(tracks: FeatureTracks, camera0: Sequence[float], pixel_size_mm: Union[float, Sequence[float]], *,
                   keyframe_step: int = 3, min_views: int = 3, loss_scale_px: float = 2.0,
                   max_nfev: int = 100, ftol: float = 1e-6, max_track_frames: Optional[int] = None,
-                  polish_steps: int = 200) -> BundleResult:
+                  polish_steps: int = 200, line_delay: bool = False,
+                  reference_row: Optional[float] = None) -> BundleResult:
     """Adjust the camera, keyframe poses (every ``keyframe_step``-th recorded frame) and points
     (features seen in >= ``min_views`` keyframes) from ``camera0`` and the filter's poses and
     points; soft_l1 loss at ``loss_scale_px``: ``max_nfev`` evaluations of SciPy's TRF, then up to
-    ``polish_steps`` exact Levenberg-Marquardt steps (_polish)."""
+    ``polish_steps`` exact Levenberg-Marquardt steps (_polish). line_delay: estimate the rolling
+    shutter's line delay too, from 0, with rows timed from ``reference_row`` (build_problem)."""
     if len(tracks) == 0:
         raise InputError("bundle adjustment: no tracks")
     started = time.perf_counter()
     px = np.broadcast_to(np.asarray(pixel_size_mm, float).reshape(-1), (2,)).copy()
-    problem = build_problem(tracks, np.asarray(camera0, float), px, keyframe_step, min_views, max_track_frames)
+    problem = build_problem(tracks, np.asarray(camera0, float), px, keyframe_step, min_views, max_track_frames,
+                            line_delay, reference_row)
     x0 = problem.x_full[problem.free]
     lower = np.full(len(x0), -np.inf)
     lower[0] = 1.0    # f > 0: from a poor start the mirrored camera (f < 0) is a solution too
@@ -509,13 +640,28 @@ def bundle_adjust(tracks: FeatureTracks, camera0: Sequence[float], pixel_size_mm
                         # (f then within ~0.02 % of the full convergence, far inside its sigma)
                         tr_options={"atol": 1e-12, "btol": 1e-12}, ftol=ftol, loss="soft_l1", f_scale=loss_scale_px,
                         bounds=(lower, np.inf), max_nfev=max_nfev)
-    x, polished = _polish(problem, fit.x, loss_scale_px, lower, polish_steps)
-    camera = problem.unpack(x)[0]
-    cov, cov_tracks, cov_two_way, sigma_px, inliers, step = _camera_covariance(problem, x, loss_scale_px)
-    half_two_way = _Z99 * np.sqrt(np.maximum(np.diag(cov_two_way), 0.0))
-    # how far from the minimum the solver stopped, in the camera's own (model) sigmas: TRF can run out
+    x, polished, dropped = fit.x, 0, 0
+    for _ in range(3):   # points that went behind a camera: dropped, then the finish again
+        problem, x, behind = _without_points_behind(problem, x, min_views)
+        dropped += behind
+        x, steps = _polish(problem, x, loss_scale_px, lower[:len(x)], polish_steps)
+        polished += steps
+        if not (_depths(problem, x) <= 1e-3).any():
+            break
+    globals_ = problem.unpack(x)[0]
+    camera = globals_[:_CAMERA_SIZE]
+    cov_g, cov_tracks_g, cov_two_way_g, sigma_px, inliers, step = _camera_covariance(problem, x, loss_scale_px)
+    # how far from the minimum the solver stopped, in the globals' own (model) sigmas: TRF can run out
     # of evaluations creeping along a flat valley after the camera has long settled
-    step_sigma = float(np.max(np.abs(step) / np.sqrt(np.maximum(np.diag(cov), 1e-300))))
+    free_globals = problem.free[:_GLOBAL_SIZE]
+    step_sigma = float(np.max(np.abs(step[free_globals]) / np.sqrt(np.maximum(np.diag(cov_g)[free_globals], 1e-300))))
+    line_delay_s = line_delay_bounds = None
+    if problem.estimates_line_delay:
+        half_d = _Z99 * np.sqrt(max(cov_two_way_g[_CAMERA_SIZE, _CAMERA_SIZE], 0.0))
+        line_delay_s = float(globals_[_CAMERA_SIZE]) * _US
+        line_delay_bounds = np.array([globals_[_CAMERA_SIZE] - half_d, globals_[_CAMERA_SIZE] + half_d]) * _US
+    cov, cov_tracks, cov_two_way = (c[:_CAMERA_SIZE, :_CAMERA_SIZE] for c in (cov_g, cov_tracks_g, cov_two_way_g))
+    half_two_way = _Z99 * np.sqrt(np.maximum(np.diag(cov_two_way), 0.0))
     half = _Z99 * np.sqrt(np.maximum(np.diag(cov), 0.0))
     half_tracks = _Z99 * np.sqrt(np.maximum(np.diag(cov_tracks), 0.0))
     return BundleResult(camera=camera, covariance=cov, bounds_99=np.c_[camera - half, camera + half],
@@ -526,4 +672,6 @@ def bundle_adjust(tracks: FeatureTracks, camera0: Sequence[float], pixel_size_mm
                         observations=len(problem.uv), inlier_fraction=inliers,
                         rms_px=float(np.sqrt(np.mean(residuals_and_jacobian(problem, x, jacobian=False)[0] ** 2))), nfev=int(fit.nfev), status=int(fit.status),
                         message=str(fit.message), elapsed_s=time.perf_counter() - started,
-                        start=np.asarray(camera0, float), step_sigma=step_sigma, extra={"polish_steps": polished})
+                        start=np.asarray(camera0, float), step_sigma=step_sigma, extra={"polish_steps": polished, "dropped_behind": dropped},
+                        line_delay_s=line_delay_s, line_delay_bounds_99_s=line_delay_bounds,
+                        covariance_globals=cov_two_way_g)

@@ -126,6 +126,26 @@ class SelfCalibResult:
     bundle_error: str = ""
     estimate_from: str = "filter"
 
+    def line_delay_estimate(self) -> Optional[tuple[float, np.ndarray]]:
+        """The line delay (s/row) the bundle adjustment estimated (no line delay given) and its 99 %
+        bounds (2,), clustered plus the drift's shift like the camera's; None when not estimated."""
+        ba, cut = self.bundle, self.bundle_cut
+        if ba is None or ba.line_delay_s is None:
+            return None
+        if cut is None or cut.line_delay_s is None:
+            return ba.line_delay_s, np.array([-np.inf, np.inf])
+        sigma_us2 = ba.covariance_globals[5, 5] + (1e6 * (ba.line_delay_s - cut.line_delay_s)) ** 2
+        half = _Z99 * np.sqrt(sigma_us2) * 1e-6
+        return ba.line_delay_s, np.array([ba.line_delay_s - half, ba.line_delay_s + half])
+
+    def _line_delay_summary(self) -> dict:
+        estimate = self.line_delay_estimate()
+        if estimate is None:
+            return {"bundle_line_delay_s": None, "bundle_line_delay_bounds_99_s": None}
+        bounds = estimate[1]
+        return {"bundle_line_delay_s": float(estimate[0]),
+                "bundle_line_delay_bounds_99_s": [float(b) for b in bounds] if np.all(np.isfinite(bounds)) else None}
+
     def bundle_bounds_99(self) -> Optional[np.ndarray]:
         """The bundle adjustment's 99 % bounds (5, 2) with the drift's systematic error
         (bundle_covariance), whether or not they are the reported ones; None without an adjustment."""
@@ -169,6 +189,7 @@ class SelfCalibResult:
                    bundle_tracks_cut=None if self.bundle_cut is None else self.bundle_cut.summary_dict(),
                    bundle_bounds_99=None if self.bundle is None else self.bundle_bounds_99().tolist(),
                    bundle_error=self.bundle_error,
+                   **self._line_delay_summary(),
                    max_map_size=int(self.history.map_size.max()) if len(self.history) else 0,
                    history=self.history.summary_dict())
         return out
@@ -355,8 +376,12 @@ def _run(frames, width: int, height: int, pixel_size_mm, options, front_end, ini
     if line_delay_s > 0:  # measurements moved to one time per frame (rolling_shutter.py)
         measured, gray = RollingShutterCorrection(source, line_delay_s, height), timed_frames(gray)
     recorder = None
-    if record:   # what the bank used, for the bundle adjustment (bundle.TrackRecorder)
-        recorder = measured = TrackRecorder(measured)
+    if record:   # what the bank used, with the frames' times, for the bundle adjustment (bundle.TrackRecorder)
+        if line_delay_s > 0:
+            recorder = measured = TrackRecorder(measured, timed=True)
+        else:
+            gray = timed_frames(gray)
+            recorder = measured = TrackRecorder(measured, unwrap=True)
 
         def each(k, running, report, user=on_frame):
             recorder.on_frame(k, running, report)
@@ -369,19 +394,21 @@ def _run(frames, width: int, height: int, pixel_size_mm, options, front_end, ini
     return bank, history, source, recorder
 
 
-def _bundle(recorder: TrackRecorder, camera0: np.ndarray, pixel_size_mm, frames: int
-            ) -> tuple[Optional[BundleResult], Optional[BundleResult], str]:
+def _bundle(recorder: TrackRecorder, camera0: np.ndarray, pixel_size_mm, frames: int, line_delay: bool,
+            height: int) -> tuple[Optional[BundleResult], Optional[BundleResult], str]:
     """The adjustment over whole tracks and over tracks cut into BUNDLE_DRIFT_CUT_FRAMES pieces
-    (None where it failed) and the error message."""
+    (None where it failed) and the error message; line_delay: estimate the line delay in both
+    (rows timed from the middle row)."""
     step = max(3, -(-frames // MAX_BUNDLE_KEYFRAMES))
     tracks = recorder.tracks()
+    shutter = dict(line_delay=line_delay, reference_row=0.5 * (height - 1))
     try:
-        ba = bundle_adjust(tracks, camera0, pixel_size_mm, keyframe_step=step)
+        ba = bundle_adjust(tracks, camera0, pixel_size_mm, keyframe_step=step, **shutter)
     except (ValueError, np.linalg.LinAlgError) as error:   # InputError is a ValueError
         return None, None, str(error)
     try:
         cut = bundle_adjust(tracks, ba.camera, pixel_size_mm, keyframe_step=step,
-                            max_track_frames=BUNDLE_DRIFT_CUT_FRAMES)
+                            max_track_frames=BUNDLE_DRIFT_CUT_FRAMES, **shutter)
     except (ValueError, np.linalg.LinAlgError) as error:
         return ba, None, str(error)
     return ba, cut, ""
@@ -460,16 +487,16 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
         bundled = None, None, ""
         if bundle:
             bar.update(len(history), "bundle adjustment over the filter's tracks")
-            bundled = _bundle(recorder, mean, pixel_size_mm, len(history))
+            bundled = _bundle(recorder, mean, pixel_size_mm, len(history), line_delay_s == 0, height)
     warnings = []
     if bank.num_gaussians > 1:
         warnings.append(f"{bank.num_gaussians} Gaussians remain in the filter bank: the sequence did not single out "
                         "one calibration for the filter "
                         "(move more, with rotation and translation, through a textured scene)")
-    if bundle and line_delay_s == 0:
-        warnings.append("the rolling shutter is not compensated (no line delay given): on a phone or other "
-                        "rolling-shutter camera give the line delay (`rscalib linedelay`; --line-delay): without it "
-                        "the bounds do not cover the shutter's error, largest when looking around (docs/sog.md §20)")
+    if not bundle and line_delay_s == 0:
+        warnings.append("the rolling shutter is not compensated (no line delay given, no bundle adjustment): on a "
+                        "phone or other rolling-shutter camera give the line delay (`rscalib linedelay`; "
+                        "--line-delay) or let the bundle adjustment estimate it (docs/sog.md §21)")
     used = np.median(history.features_used)
     if used < 0.5 * source.options.min_visible:
         warnings.append(f"few features matched per frame (median {used:.0f}); the scene may lack texture")

@@ -1,6 +1,8 @@
 """Bundle adjustment over a self-calibration run's tracks (rscalib.selfcalib.bundle, issue 11)."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -9,20 +11,54 @@ from rscalib.selfcalib.bundle import TrackRecorder, build_problem, bundle_adjust
 from rscalib.selfcalib.calibrate import default_options
 from rscalib.selfcalib.driver import run_bank
 from rscalib.selfcalib.prior import PAPER_PIXEL_SIZE_MM, make_bank
-from rscalib.sim.scene_features import PAPER_CAMERA, CiveraCamera, TrueCorrespondences, simulate_sequence
+from rscalib.selfcalib.rolling_shutter import timed_frames
+from rscalib.sim.scene_features import (
+    PAPER_CAMERA,
+    CiveraCamera,
+    HandheldRoomMotion,
+    TrueCorrespondences,
+    simulate_sequence,
+)
 
 NOISE_PX = 0.5
+LINE_DELAY_S = 60e-6        # 14 ms over 240 rows
+REFERENCE_ROW = 119.5
+
+
+def _recorded_run(sequence):
+    source = TrueCorrespondences(sequence)
+    recorder = TrackRecorder(source, unwrap=True)
+    bank = make_bank(320, 240, PAPER_PIXEL_SIZE_MM, options=default_options())
+    history = run_bank(bank, timed_frames(source.frames()), recorder, on_frame=recorder.on_frame)
+    return history.mean[-1].copy(), recorder.tracks()
 
 
 @pytest.fixture(scope="module")
 def run():
     """The bank over a 4 s simulated hand-held room walk (true correspondences, 0.5 px noise), with
     its tracks recorded."""
-    source = TrueCorrespondences(simulate_sequence(duration_s=4.0, seed=3, noise_px=NOISE_PX))
-    recorder = TrackRecorder(source)
-    bank = make_bank(320, 240, PAPER_PIXEL_SIZE_MM, options=default_options())
-    history = run_bank(bank, source.frames(), recorder, on_frame=recorder.on_frame)
-    return history.mean[-1].copy(), recorder.tracks()
+    return _recorded_run(simulate_sequence(duration_s=4.0, seed=3, noise_px=NOISE_PX))
+
+
+def _rolling_shutter(sequence, motion, line_delay_s, reference_row):
+    """The same sequence seen by a rolling shutter: each point projected with the pose at its own
+    row's time t + d (v - v_ref) (fixed point of the row, three passes), the same pixel noise added."""
+    camera, uv_rs = sequence.camera, []
+    for k, t in enumerate(sequence.times_s):
+        X = sequence.points_w[sequence.ids[k]]
+        uv = sequence.uv_true[k]
+        for _ in range(3):
+            R_wc, r_w = motion.pose_wc(t + line_delay_s * (uv[:, 1] - reference_row))
+            uv = camera.project(np.einsum("nji,nj->ni", R_wc, X - r_w))[0]
+        uv_rs.append(uv + (sequence.uv[k] - sequence.uv_true[k]))
+    return dataclasses.replace(sequence, uv=uv_rs, uv_true=uv_rs)
+
+
+@pytest.fixture(scope="module")
+def rolling_run():
+    """The walk of ``run`` through a rolling shutter of LINE_DELAY_S."""
+    sequence = simulate_sequence(duration_s=4.0, seed=3, noise_px=NOISE_PX)
+    return _recorded_run(_rolling_shutter(sequence, HandheldRoomMotion(seed=3), LINE_DELAY_S, REFERENCE_ROW))
 
 
 def test_bundle_recovers_the_simulated_camera_within_its_bounds(run):
@@ -35,6 +71,26 @@ def test_bundle_recovers_the_simulated_camera_within_its_bounds(run):
     # the residuals are the simulated noise: an oracle of the model, the poses and the points
     assert result.sigma_px == pytest.approx(NOISE_PX, rel=0.15)
     assert result.keyframes == len(range(0, len(tracks.R_cw), 3))    # every 3rd recorded frame
+    assert result.line_delay_s is None
+
+
+def test_bundle_estimates_the_line_delay_of_a_rolling_shutter(run, rolling_run):
+    """Simulated truth: the line delay inside its 99 % bounds and within 25 %, and the camera inside
+    its bounds; the global-shutter adjustment of the same tracks is further from the truth."""
+    filter_mean, tracks = rolling_run
+    truth = PAPER_CAMERA.params
+    result = bundle_adjust(tracks, filter_mean, PAPER_PIXEL_SIZE_MM, line_delay=True, reference_row=REFERENCE_ROW)
+    lo, hi = result.line_delay_bounds_99_s
+    assert lo <= LINE_DELAY_S <= hi, (result.line_delay_s, lo, hi)
+    assert abs(result.line_delay_s / LINE_DELAY_S - 1) < 0.25
+    inside = (result.bounds_99_clustered[:, 0] <= truth) & (truth <= result.bounds_99_clustered[:, 1])
+    assert inside.all(), (result.camera, result.bounds_99_clustered)
+    assert result.sigma_px == pytest.approx(NOISE_PX, rel=0.15)
+    ignoring = bundle_adjust(tracks, filter_mean, PAPER_PIXEL_SIZE_MM)
+    assert ignoring.sigma_px > result.sigma_px
+    # on the global-shutter walk the estimated line delay is zero within its bounds
+    still = bundle_adjust(run[1], run[0], PAPER_PIXEL_SIZE_MM, line_delay=True, reference_row=REFERENCE_ROW)
+    assert still.line_delay_bounds_99_s[0] <= 0.0 <= still.line_delay_bounds_99_s[1]
 
 
 @pytest.mark.parametrize("camera", [PAPER_CAMERA, CiveraCamera(f=525.06, cx=308.65, cy=236.54, k1=-7.613e-3,
@@ -49,18 +105,24 @@ def test_projection_matches_the_simulators(camera):
                                atol=1e-9)
 
 
-def test_jacobian_matches_central_differences(run):
-    filter_mean, tracks = run
-    problem = build_problem(tracks, filter_mean, np.array([PAPER_PIXEL_SIZE_MM] * 2), 3, 3)
+@pytest.mark.parametrize("line_delay", [False, True])
+def test_jacobian_matches_central_differences(rolling_run, line_delay):
+    filter_mean, tracks = rolling_run
+    problem = build_problem(tracks, filter_mean, np.array([PAPER_PIXEL_SIZE_MM] * 2), 3, 3, line_delay=line_delay,
+                            reference_row=REFERENCE_ROW)
+    assert problem.estimates_line_delay == line_delay
     rng = np.random.default_rng(11)
     x = problem.x_full[problem.free]
     scale = np.full(len(x), 0.01)                     # rad, m: rotations away from zero
     scale[:5] = 0.01 * np.abs(x[:5])                    # the camera by 1 %
+    if line_delay:
+        x[5] = 50.0                                     # µs/row
     x = x + scale * rng.standard_normal(len(x))
     _, jac = residuals_and_jacobian(problem, x)
     dense = jac.toarray()
-    point_cols = np.arange(problem.point_offset() - 6, len(x))   # the points (the first pose is held)
-    columns = np.r_[np.arange(17), rng.choice(point_cols, 12, replace=False)]
+    first_point = int(problem.free[:problem.point_offset()].sum())   # the first pose is held
+    point_cols = np.arange(first_point, len(x))
+    columns = np.r_[np.arange(18), rng.choice(point_cols, 12, replace=False)]
     for c in columns:
         step = 1e-6 * max(1.0, abs(x[c]))
         e = np.zeros_like(x)
@@ -71,15 +133,19 @@ def test_jacobian_matches_central_differences(run):
                                    err_msg=f"column {c}")
 
 
-@pytest.mark.parametrize("max_track_frames", [None, 20])
-def test_schur_complement_matches_a_dense_inverse(run, max_track_frames):
-    filter_mean, tracks = run
-    problem = build_problem(tracks, filter_mean, np.array([PAPER_PIXEL_SIZE_MM] * 2), 3, 3, max_track_frames)
+@pytest.mark.parametrize("max_track_frames, line_delay", [(None, False), (20, False), (None, True)])
+def test_schur_complement_matches_a_dense_inverse(rolling_run, max_track_frames, line_delay):
+    filter_mean, tracks = rolling_run
+    problem = build_problem(tracks, filter_mean, np.array([PAPER_PIXEL_SIZE_MM] * 2), 3, 3, max_track_frames,
+                            line_delay=line_delay, reference_row=REFERENCE_ROW)
     _, jac = residuals_and_jacobian(problem, problem.x_full[problem.free])
     normal = (jac.T @ jac).tocsr()
-    dense = np.linalg.inv(normal.toarray())[:, :5]
+    globals_ = 6 if line_delay else 5
+    dense = np.linalg.inv(normal.toarray())[:, :globals_]
     columns = bundle_module._camera_columns_of_inverse(problem, normal)
-    np.testing.assert_allclose(columns[:5], dense[:5], rtol=1e-6, atol=1e-9 * np.abs(dense[:5]).max())
+    assert columns.shape == dense.shape
+    np.testing.assert_allclose(columns[:globals_], dense[:globals_], rtol=1e-6,
+                               atol=1e-9 * np.abs(dense[:globals_]).max())
 
 
 def test_levenberg_marquardt_finish_reaches_scipys_converged_minimum(run):
@@ -140,3 +206,23 @@ def test_determined_needs_a_narrow_f_with_the_drift_shift_included():
     # an estimate outside the prior widens the reported bounds to include it
     far = _fake_bundle([700.0, *camera[1:]], np.array([100.0, 1, 1, 1e-3, 1e-4]))
     assert judge_bundle(far, far, "", prior)[2][0, 1] == 700.0
+
+
+def test_points_behind_a_camera_are_dropped_with_their_observations(run):
+    """A point moved behind its cameras leaves the problem; every other residual is unchanged."""
+    filter_mean, tracks = run
+    problem = build_problem(tracks, filter_mean, np.array([PAPER_PIXEL_SIZE_MM] * 2), 3, 3)
+    x = problem.x_full[problem.free].copy()
+    res, _ = residuals_and_jacobian(problem, x, False)
+    counts = np.bincount(problem.obs_point)
+    victim = int(np.flatnonzero(counts >= 3)[-1])
+    start = int(problem.free[:problem.point_offset()].sum()) + 3 * victim   # its x, y, z are free (not the anchor)
+    assert problem.free[problem.point_offset() + 3 * victim:problem.point_offset() + 3 * victim + 3].all()
+    x[start:start + 3] = -50.0 * x[start:start + 3]                          # through the camera to the other side
+    reduced, x_reduced, dropped = bundle_module._without_points_behind(problem, x, 3)
+    assert dropped == counts[victim]
+    assert reduced.num_points == problem.num_points - 1
+    keep = problem.obs_point != victim
+    np.testing.assert_array_equal(residuals_and_jacobian(reduced, x_reduced, False)[0],
+                                  res.reshape(-1, 2)[keep].ravel())
+    assert bundle_module._without_points_behind(reduced, x_reduced, 3)[2] == 0

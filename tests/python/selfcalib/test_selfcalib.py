@@ -104,6 +104,11 @@ def test_selfcalib_cli_recovers_the_focal_length(room_sequence, tmp_path):
     for name, value in zip(("f", "cx", "cy", "k1", "k2"), truth):
         lo, hi = result["bundle_bounds_99"][("f", "cx", "cy", "k1", "k2").index(name)]
         assert lo <= value <= hi, (name, value, lo, hi)
+    # no --line-delay: the adjustment estimated it; the render has a global shutter (0 s/row)
+    assert json.loads((room_sequence / "truth.json").read_text()).get("line_delay_s", 0.0) == 0.0
+    lo, hi = result["bundle_line_delay_bounds_99_s"]
+    assert lo <= 0.0 <= hi and lo <= result["bundle_line_delay_s"] <= hi
+    assert "line delay estimated" in proc.stdout
     assert len(result["history"]["gaussians"]) == 150
     assert result["provenance"]["command"] == "selfcalib" and result["bank"] == "sog"
     assert (tmp_path / "res" / "history.png").stat().st_size > 0
