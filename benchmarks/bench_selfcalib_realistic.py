@@ -138,6 +138,13 @@ def summarise(rows: list[dict]) -> dict:
                                            len(side)),
         "by_style_size": {},
     }
+    delays = [r["line_delay_s"] for r in ok if "line_delay_s" in r]
+    if delays:   # estimated by the adjustment (no --line-delay): against the render's
+        errors = sorted(abs(d["bundle"] / d["truth"] - 1.0) * 100.0 for d in delays)
+        summary["line_delay_inside_bundle_99"] = frac(sum(d["bounds_99"][0] <= d["truth"] <= d["bounds_99"][1]
+                                                          for d in delays), len(delays))
+        summary["line_delay_median_abs_error_pct"] = round(errors[len(errors) // 2], 2)
+        summary["line_delay_max_abs_error_pct"] = round(errors[-1], 2)
     for style in STYLES:
         for w, h in SIZES:
             g = [r for r in ok if r["style"] == style and r["size"] == f"{w}x{h}"]
@@ -147,6 +154,8 @@ def summarise(rows: list[dict]) -> dict:
             summary["by_style_size"][f"{style} {w}x{h}"] = {
                 "runs": len(g), "determined": sum(r["determined"] for r in g),
                 "inside_all_five": sum(all(r["inside"].values()) for r in g),
+                "determined_f_within_2pct": sum(r["determined"] and abs(r["f_error_pct"]) <= 2.0 for r in g),
+                "bundle_inside_all_five": sum(all(r.get("inside_bundle", {"f": False}).values()) for r in g),
                 "filter_inside_all_five": sum(all(r["inside_filter"].values()) for r in g),
                 "median_abs_f_error_pct": round(errs[len(errs) // 2], 2), "max_abs_f_error_pct": round(errs[-1], 2),
                 "median_wall_s": sorted(r["wall_s"] for r in g)[len(g) // 2],
@@ -210,7 +219,12 @@ def main() -> None:
     ap.add_argument("--tag", default="", help="suffix of the runs folder under CACHE (keeps variants apart)")
     ap.add_argument("--feature-level", action="store_true",
                     help="only the filter on true correspondences of the same motions (no images); prints, writes nothing")
+    ap.add_argument("--markdown", metavar="RESULT_JSON", default=None,
+                    help="print the per-style table of a written result (docs/benchmarks.md) and exit")
     args = ap.parse_args()
+    if args.markdown:
+        print(markdown_table(summarise(json.loads(Path(args.markdown).read_text())["runs"])))
+        return
     if args.feature_level:
         feature_level(range(args.seed0, args.seed0 + args.seeds), args.frames)
         return
@@ -234,6 +248,20 @@ def main() -> None:
                      if "line_delay_s" in row else ""), flush=True)
             doc = write(args, rows, started, len(jobs))  # after every run: a partial result survives
     print(json.dumps(doc["summary"], indent=1))
+
+
+def markdown_table(summary: dict) -> str:
+    """The per style and size table of docs/benchmarks.md."""
+    lines = ["| style | size | runs | determined (exit 0) | determined with f within 2 % | truth in all five reported "
+             "99 % | truth in all five of the adjustment's own 99 % | median \\|f err\\| | max \\|f err\\| | "
+             "median wall s | max peak RSS MB |",
+             "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for key, g in summary["by_style_size"].items():
+        style, size = key.split()
+        lines.append(f"| {style} | {size} | {g['runs']} | {g['determined']} | {g.get('determined_f_within_2pct', '')} | "
+                     f"{g['inside_all_five']} | {g.get('bundle_inside_all_five', '')} | {g['median_abs_f_error_pct']} % | "
+                     f"{g['max_abs_f_error_pct']} % | {g['median_wall_s']} | {g['max_peak_rss_mb']} |")
+    return "\n".join(lines)
 
 
 def write(args: argparse.Namespace, rows: list[dict], started: float, planned: int) -> dict:

@@ -579,6 +579,15 @@ def _polish(problem: BundleProblem, x: np.ndarray, loss_scale_px: float, lower: 
     return x, iterations
 
 
+def _frame_interval_s(tracks: FeatureTracks) -> Optional[float]:
+    """The median time between recorded frames (None without times)."""
+    if not tracks.t_s:
+        return None
+    steps = np.diff(np.sort(np.fromiter(tracks.t_s.values(), float)))
+    steps = steps[steps > 0]
+    return float(np.median(steps)) if len(steps) else None
+
+
 def _depths(problem: BundleProblem, x: np.ndarray) -> np.ndarray:
     _, theta, p, X = problem.unpack(x)
     R = Rotation.from_rotvec(theta).as_matrix() @ problem.R0
@@ -672,6 +681,7 @@ def bundle_adjust(tracks: FeatureTracks, camera0: Sequence[float], pixel_size_mm
                         observations=len(problem.uv), inlier_fraction=inliers,
                         rms_px=float(np.sqrt(np.mean(residuals_and_jacobian(problem, x, jacobian=False)[0] ** 2))), nfev=int(fit.nfev), status=int(fit.status),
                         message=str(fit.message), elapsed_s=time.perf_counter() - started,
-                        start=np.asarray(camera0, float), step_sigma=step_sigma, extra={"polish_steps": polished, "dropped_behind": dropped},
+                        start=np.asarray(camera0, float), step_sigma=step_sigma, extra={"polish_steps": polished, "dropped_behind": dropped,
+                                                                    "frame_interval_s": _frame_interval_s(tracks)},
                         line_delay_s=line_delay_s, line_delay_bounds_99_s=line_delay_bounds,
                         covariance_globals=cov_two_way_g)

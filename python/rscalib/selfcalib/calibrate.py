@@ -23,7 +23,7 @@ from .rolling_shutter import RollingShutterCorrection, timed_frames
 
 __all__ = ["PARAM_NAMES", "GrayFrames", "Restart", "SelfCalibResult", "civera_to_opencv", "judge_determined",
            "read_gray_frames", "self_calibrate", "default_options", "RANSAC_HYPOTHESES", "RESTART_OFFSET", "DETERMINED_MAX_CONTRACTION",
-           "DETERMINED_PP_TOLERANCE", "UNDETERMINED_PP_HALF_WIDTH", "DETERMINED_F_HALF_WIDTH", "MIN_BUNDLE_POINTS",
+           "DETERMINED_PP_TOLERANCE", "UNDETERMINED_PP_HALF_WIDTH", "DETERMINED_F_HALF_WIDTH", "MIN_BUNDLE_POINTS", "MAX_READOUT_FRAMES",
            "MAX_BUNDLE_KEYFRAMES", "BUNDLE_DRIFT_CUT_FRAMES", "bundle_covariance", "judge_bundle", "FILTER_MEMORY_FACTOR", "map_size_bound",
            "predicted_memory_bytes"]
 
@@ -54,6 +54,10 @@ _Z99 = 2.5758293035489004
 # +-DETERMINED_F_HALF_WIDTH of f: a user's requirement ("f known to 2 %"), not a fitted number.
 DETERMINED_F_HALF_WIDTH = 0.02
 MIN_BUNDLE_POINTS = 30
+# A rolling shutter reads its rows within one frame interval (at most; a phone at 30 fps, about a
+# third to all of it): a line delay whose 99 % interval lies wholly beyond this many frame intervals per
+# image is the model misfitting the data, not a shutter (docs/sog.md §21).
+MAX_READOUT_FRAMES = 1.25
 # Converged: the solver stopped on its own criterion, or the camera's remaining Gauss-Newton step is
 # under BUNDLE_STEP_SIGMA of its (model) sigma: it moves no more than a tenth of its uncertainty.
 BUNDLE_STEP_SIGMA = 0.1
@@ -301,13 +305,24 @@ def bundle_covariance(ba: BundleResult, cut: Optional[BundleResult]) -> np.ndarr
     return ba.covariance_clustered + np.diag((ba.camera - cut.camera) ** 2)
 
 
+def _impossible_readout(ba: BundleResult, image_height: Optional[int]) -> bool:
+    interval = ba.extra.get("frame_interval_s")
+    if ba.line_delay_s is None or image_height is None or not interval:
+        return False
+    least = min(abs(b) for b in ba.line_delay_bounds_99_s) if np.prod(ba.line_delay_bounds_99_s) > 0 else 0.0
+    return least * image_height > MAX_READOUT_FRAMES * interval
+
+
 def judge_bundle(ba: Optional[BundleResult], cut: Optional[BundleResult], error: str, prior_bounds: np.ndarray,
-                 max_f_half_width: float = DETERMINED_F_HALF_WIDTH) -> tuple[bool, str, np.ndarray]:
+                 max_f_half_width: float = DETERMINED_F_HALF_WIDTH, image_height: Optional[int] = None
+                 ) -> tuple[bool, str, np.ndarray]:
     """(determined, reason, bounds to report) from the bundle adjustment ``ba`` and the same over
     tracks cut into pieces ``cut``: determined when it converged over >= MIN_BUNDLE_POINTS tracks and
     the 99 % interval of f from bundle_covariance is within +-``max_f_half_width`` of f; the bounds
     are then that interval for all five. Not determined: the prior's bounds, widened to include the
-    estimate."""
+    estimate. With the line delay estimated (and ``image_height`` given), a readout of the rows that
+    must take longer than MAX_READOUT_FRAMES frame intervals is no rolling shutter: the model does not
+    fit the data, not determined either."""
     if ba is None:
         return False, f"the bundle adjustment failed ({error})", prior_bounds.copy()
     f = float(ba.camera[0])
@@ -326,6 +341,12 @@ def judge_bundle(ba: Optional[BundleResult], cut: Optional[BundleResult], error:
                    "a bound; a textured scene seen for longer?)")
     elif cut is None:
         problem = f"the drift check (the adjustment over tracks cut into pieces) failed ({error})"
+    elif _impossible_readout(ba, image_height):
+        lo, hi = ba.line_delay_bounds_99_s
+        problem = (f"the adjustment's line delay ({1e6 * ba.line_delay_s:.1f} us/row, 99 % [{1e6 * lo:.1f}, "
+                   f"{1e6 * hi:.1f}]) reads the {image_height} rows in more than {MAX_READOUT_FRAMES:g} frame "
+                   f"intervals ({1e3 * ba.extra['frame_interval_s']:.1f} ms): the model does not fit (moving "
+                   "objects, zoom, or stabilisation in the video?)")
     elif not np.all(np.isfinite(reported)) or not half <= max_f_half_width:
         problem = (f"the data pin f only to +-{100 * half:.1f} % (bundle adjustment {spread}; determined needs "
                    f"+-{100 * max_f_half_width:g} %): little rotation, or a mostly sideways motion?")
@@ -506,7 +527,7 @@ def self_calibrate(frames, image_size: tuple[int, int], *,
     ba, cut, ba_error, estimate, estimate_from = None, None, "", mean, "filter"
     if bundle:
         ba, cut, ba_error = bundled
-        determined, reason, bounds = judge_bundle(ba, cut, ba_error, prior, max_f_half_width)
+        determined, reason, bounds = judge_bundle(ba, cut, ba_error, prior, max_f_half_width, height)
         if ba is not None:
             estimate, estimate_from, covariance = ba.camera, "bundle adjustment", bundle_covariance(ba, cut)
     else:

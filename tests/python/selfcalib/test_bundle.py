@@ -203,6 +203,16 @@ def test_determined_needs_a_narrow_f_with_the_drift_shift_included():
     assert judge_bundle(_fake_bundle(camera, half, status=0, step_sigma=0.05), same, "", prior)[0]
     assert "drift check" in judge_bundle(ba, None, "only 3 features", prior)[1]
     assert not judge_bundle(None, None, "no tracks", prior)[0]
+    # a line delay that reads 240 rows in more than 1.25 frames (30 fps) is no shutter: not determined
+    for delay_us, lo_us, hi_us, ok in [(60.0, 50.0, 70.0, True), (300.0, 200.0, 400.0, False),
+                                       (-300.0, -400.0, -200.0, False), (150.0, -10.0, 300.0, True)]:
+        shutter = _fake_bundle(camera, half)
+        shutter.line_delay_s, shutter.line_delay_bounds_99_s = delay_us * 1e-6, np.array([lo_us, hi_us]) * 1e-6
+        shutter.extra["frame_interval_s"] = 1 / 30
+        verdict = judge_bundle(shutter, same, "", prior, image_height=240)
+        assert verdict[0] is ok, (delay_us, verdict[1])
+        assert ok or "does not fit" in verdict[1]
+        assert judge_bundle(shutter, same, "", prior)[0]              # without the image height: not checked
     # an estimate outside the prior widens the reported bounds to include it
     far = _fake_bundle([700.0, *camera[1:]], np.array([100.0, 1, 1, 1e-3, 1e-4]))
     assert judge_bundle(far, far, "", prior)[2][0, 1] == 700.0
