@@ -334,8 +334,10 @@ def judge_bundle(ba: Optional[BundleResult], cut: Optional[BundleResult], error:
               "keyframe, plus the tracks' drift)")
     problem = ""
     if ba.status <= 0 and not ba.step_sigma <= BUNDLE_STEP_SIGMA:
-        problem = (f"the bundle adjustment did not converge ({ba.message}; the camera is still "
-                   f"{ba.step_sigma:.2f} sigma from the minimum)")
+        # A block of keyframes collapsing with its points (docs/sog.md §21) leaves near-singular normal
+        # equations and an astronomic step: say so rather than print 1e80.
+        far = f"{ba.step_sigma:.2f} sigma" if ba.step_sigma < 1e3 else "over 1000 sigma (near-singular normal equations)"
+        problem = f"the bundle adjustment did not converge ({ba.message}; the camera is still {far} from the minimum)"
     elif ba.points < MIN_BUNDLE_POINTS:
         problem = (f"only {ba.points} feature tracks span 3 or more keyframes (>= {MIN_BUNDLE_POINTS} needed for "
                    "a bound; a textured scene seen for longer?)")

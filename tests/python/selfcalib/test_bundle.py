@@ -201,6 +201,8 @@ def test_determined_needs_a_narrow_f_with_the_drift_shift_included():
     assert "did not converge" in judge_bundle(_fake_bundle(camera, half, status=0, step_sigma=0.5), same, "",
                                               prior)[1]
     assert judge_bundle(_fake_bundle(camera, half, status=0, step_sigma=0.05), same, "", prior)[0]
+    assert "over 1000 sigma" in judge_bundle(_fake_bundle(camera, half, status=0, step_sigma=1e80), same, "",
+                                             prior)[1]
     assert "drift check" in judge_bundle(ba, None, "only 3 features", prior)[1]
     assert not judge_bundle(None, None, "no tracks", prior)[0]
     # a line delay that reads 240 rows in more than 1.25 frames (30 fps) is no shutter: not determined
