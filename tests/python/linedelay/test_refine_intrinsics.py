@@ -3,8 +3,11 @@ with the given calibration as a prior (docs/formulation.md §14).
 
 Simulated rolling-shutter observations (rscalib.sim.target_observations, exact RS projections, fixed seeds)
 with a deliberately wrong starting calibration (f 2 % off, principal point 8 px off) must give d, f and c
-within 3 sigma of the truth; the default path (no refinement) must give bit-identical numbers to the
-golden file written before the feature existed (data/default_path_golden.json)."""
+within 3 sigma of the truth; the default path (no refinement) must give the numbers of the golden file
+written before the feature existed (data/default_path_golden.json): the same knots, rounds and counts,
+every float to 1e-12 relative. Not bit for bit: libm and BLAS pick their kernels by CPU (the golden file
+was written on an AVX2 machine; an AVX-512 one differs in the last bits), while a change of the path
+would move the numbers by far more."""
 import json
 import math
 from pathlib import Path
@@ -78,9 +81,29 @@ def _default_path(monkeypatch=None):
     return spline.calibrate_line_delay(sim.observations, CAMERA)
 
 
-def test_the_default_path_is_bit_identical_to_before_the_feature(monkeypatch):
+def _assert_matches_golden(got: dict, golden: dict, rel: float) -> None:
+    """The same knots, keys, rounds and counts; every float, and every hex-stored one, to ``rel``."""
+    assert got["knots"] == golden["knots"] and got["keys"] == golden["keys"]
+    assert [{k: v for k, v in h.items() if not isinstance(v, float)} for h in got["history"]] == \
+        [{k: v for k, v in h.items() if not isinstance(v, float)} for h in golden["history"]]
+    for name, value in golden.items():
+        if isinstance(value, float):
+            assert got[name] == pytest.approx(value, rel=rel), name
+        elif isinstance(value, (bool, int)):
+            assert got[name] == value, name
+    for mine, theirs in zip(got["history"], golden["history"]):
+        for name, value in theirs.items():
+            if isinstance(value, float):
+                assert mine[name] == pytest.approx(value, rel=rel), name
+    for name in ("control_points_hex", "line_delay_hex", "std_hex"):
+        mine = np.array([float.fromhex(x) for x in np.atleast_1d(got[name])])
+        theirs = np.array([float.fromhex(x) for x in np.atleast_1d(golden[name])])
+        np.testing.assert_allclose(mine, theirs, rtol=rel, atol=1e-15, err_msg=name)
+
+
+def test_the_default_path_gives_the_golden_numbers_to_machine_rounding(monkeypatch):
     result = _default_path(monkeypatch)
-    assert _golden_fields(result) == json.loads(GOLDEN.read_text())
+    _assert_matches_golden(_golden_fields(result), json.loads(GOLDEN.read_text()), rel=1e-12)
     assert result.intrinsics is None and result.camera is None
     assert "intrinsics" not in result.summary_dict()
     assert _core.RsSolverOptions().refine_intrinsics is False
@@ -89,23 +112,7 @@ def test_the_default_path_is_bit_identical_to_before_the_feature(monkeypatch):
 def test_the_leaner_solve_gives_the_golden_numbers_to_rounding():
     """The default solver (Jacobian chained by hand, sigma_d from the Schur complement; issue 17) rounds
     differently: the same knots, rounds and counts, every number to 1e-9 relative."""
-    got, golden = _golden_fields(_default_path()), json.loads(GOLDEN.read_text())
-    assert got["knots"] == golden["knots"] and got["keys"] == golden["keys"]
-    assert [{k: v for k, v in h.items() if not isinstance(v, float)} for h in got["history"]] == \
-        [{k: v for k, v in h.items() if not isinstance(v, float)} for h in golden["history"]]
-    for name, value in golden.items():
-        if isinstance(value, float):
-            assert got[name] == pytest.approx(value, rel=1e-9), name
-        elif isinstance(value, (bool, int)):
-            assert got[name] == value, name
-    for mine, theirs in zip(got["history"], golden["history"]):
-        for name, value in theirs.items():
-            if isinstance(value, float):
-                assert mine[name] == pytest.approx(value, rel=1e-9), name
-    for name in ("control_points_hex", "line_delay_hex", "std_hex"):
-        mine = np.array([float.fromhex(x) for x in np.atleast_1d(got[name])])
-        theirs = np.array([float.fromhex(x) for x in np.atleast_1d(golden[name])])
-        np.testing.assert_allclose(mine, theirs, rtol=1e-9, atol=1e-12, err_msg=name)
+    _assert_matches_golden(_golden_fields(_default_path()), json.loads(GOLDEN.read_text()), rel=1e-9)
 
 
 @pytest.mark.parametrize("seed", [3101, 3102])
