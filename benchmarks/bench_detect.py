@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from rscalib.detection.detectors import Detector
+from rscalib.detection.options import DetectOptions
 from rscalib.detection.pipeline import detect_video, usable_cores
 from rscalib.io.targets import target_from_dict
 
@@ -100,7 +101,7 @@ def main() -> int:
                         writer.write(f)
                 writer.release()
                 started = time.perf_counter()
-                result = detect_video(video, target, workers=None, cache=False, progress=False)
+                result = detect_video(video, target, DetectOptions(workers=None, cache=False), progress=False)
                 pipeline_fps = result.frames_total / (time.perf_counter() - started)
                 rows.append({"target": name, "size": f"{size[0]}x{size[1]}", "frames": len(frames),
                              "detected_one_process": int(found), "video_frames": int(result.frames_total),

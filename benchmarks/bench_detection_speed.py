@@ -32,13 +32,15 @@ import os
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import _common  # noqa: E402  (benchmarks/_common.py: machine record, results file)
 import cv2
 import numpy as np
 
-from rscalib.detection.detectors import DetectOptions, Detector
+from rscalib.detection.detectors import Detector
+from rscalib.detection.options import DetectOptions
 from rscalib.detection.pipeline import detect_video, usable_cores
 from rscalib.detection.tracking import CheckerboardTracker, RunDetector, run_length
 from rscalib.io.targets import load_target
@@ -99,7 +101,7 @@ def process_cpu_s() -> float:
 
 def rate(source, target, options) -> tuple[float, object]:
     started, cpu_started = time.perf_counter(), process_cpu_s()
-    result = detect_video(source, target, cache=False, progress=False, options=options)
+    result = detect_video(source, target, replace(options, cache=False), progress=False)
     result.pipeline_cpu_ms = (process_cpu_s() - cpu_started) * 1e3 / max(1, result.frames_total)
     return result.frames_total / (time.perf_counter() - started), result
 

@@ -36,8 +36,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def pixel_size_mm(width: int) -> float:
-    from rscalib.selfcalib.prior import PAPER_PIXEL_SIZE_MM
-    from rscalib.sim.scene_realism import PHONE_PIXEL_SIZE_MM
+    from rscalib.reference_cameras import PAPER_PIXEL_SIZE_MM, PHONE_PIXEL_SIZE_MM
     return PAPER_PIXEL_SIZE_MM if width == 320 else PHONE_PIXEL_SIZE_MM
 
 

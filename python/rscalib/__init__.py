@@ -4,8 +4,17 @@ Rolling-shutter line-delay calibration (Oth et al. 2013), sequential self-calibr
 (Civera et al. 2009) and the LED/flicker line-delay method, on a C++ core. Frames, time and
 pixel conventions: docs/conventions.md; the package's layout: docs/architecture.md.
 
-The names below are the public API. They are imported on first use, so ``import rscalib``
-does not load the engines, OpenCV or matplotlib until they are needed.
+The names below are the public API: first one front door per job, each taking its options and
+returning a run with ``.verdict`` and ``.write(out_dir)`` (what the command writes):
+
+    rscalib.calibrate_video(video, target, camera, rscalib.LineDelayOptions())   # rscalib linedelay
+    rscalib.localize_video(video, target, camera, line_delay_s)                  # rscalib localize
+    rscalib.self_calibrate(video, rscalib.SelfCalibOptions(pixel_size_mm=...))   # rscalib selfcalib
+    rscalib.estimate_line_delay_flicker(video, frequency_hz)                     # rscalib flicker
+    rscalib.calibrate_intrinsics(images, target)                                 # rscalib intrinsics
+
+then the building blocks (files, detection, the C++ core's camera and splines). They are imported on
+first use, so ``import rscalib`` does not load the engines, OpenCV or matplotlib until they are needed.
 """
 from __future__ import annotations
 
@@ -15,37 +24,50 @@ from typing import TYPE_CHECKING, Any
 from ._version import __version__
 from .errors import InputError
 
-# public name -> module that defines it
+# public name -> module that defines it. First the front doors (one per job: the CLI, batch and the
+# experiments call the same), their options and results; then the building blocks.
 _EXPORTS = {
-    "BSpline": "._core",
+    # line delay from a video of a target (Oth et al. 2013), and the trajectory with a known one
+    "calibrate_video": ".linedelay.pipeline",
+    "LineDelayOptions": ".linedelay.options",
+    "LineDelayRun": ".linedelay.pipeline",
+    "localize_video": ".linedelay.pipeline",
+    "LocalizeOptions": ".linedelay.options",
+    "LocalizeRun": ".linedelay.pipeline",
+    # self-calibration from a natural scene (Civera et al. 2009)
+    "self_calibrate": ".selfcalib.pipeline",
+    "SelfCalibOptions": ".selfcalib.options",
+    "SelfCalibRun": ".selfcalib.pipeline",
+    # line delay from a flickering light
+    "estimate_line_delay_flicker": ".flicker.pipeline",
+    "FlickerOptions": ".flicker.options",
+    "FlickerRun": ".flicker.pipeline",
+    # intrinsics from stills (OpenCV)
+    "calibrate_intrinsics": ".intrinsics.pipeline",
+    "IntrinsicsOptions": ".intrinsics.options",
+    "IntrinsicsRun": ".intrinsics.pipeline",
+    # what every job ends with
+    "Verdict": ".verdict",
+    # files, detections, cameras
+    "load_camera": ".io.cameras",
+    "write_camera": ".io.cameras",
+    "CameraFile": ".io.cameras",
+    "load_target": ".io.targets",
+    "Target": ".io.targets",
+    "open_source": ".io.video",
+    "FrameSource": ".io.video",
+    "detect_video": ".detection.pipeline",
+    "DetectOptions": ".detection.options",
+    "DetectionResult": ".detection.result",
+    "Observations": ".observations",
+    # the C++ core's building blocks
     "CameraModel": "._core",
+    "BSpline": "._core",
     "fit_bspline": "._core",
     "poses_at": "._core",
     "rotation_matrix_to_vector": "._core",
     "rotation_vector_to_matrix": "._core",
     "unwrap_rotation_vectors": "._core",
-    "Observations": ".observations",
-    "open_source": ".io.video",
-    "FrameSource": ".io.video",
-    "load_target": ".io.targets",
-    "Target": ".io.targets",
-    "load_camera": ".io.cameras",
-    "write_camera": ".io.cameras",
-    "CameraFile": ".io.cameras",
-    "detect_video": ".detection.pipeline",
-    "DetectOptions": ".detection.detectors",
-    "DetectionResult": ".detection.result",
-    "calibrate_line_delay": ".linedelay.spline",
-    "localize": ".linedelay.spline",
-    "LineDelayResult": ".linedelay.spline",
-    "calibrate_line_delay_linear": ".linedelay.linear",
-    "LinearInterpResult": ".linedelay.linear",
-    "self_calibrate": ".selfcalib.calibrate",
-    "SelfCalibResult": ".selfcalib.calibrate",
-    "estimate_line_delay_flicker": ".flicker.estimate",
-    "FlickerResult": ".flicker.estimate",
-    "calibrate_intrinsics": ".intrinsics",
-    "IntrinsicsResult": ".intrinsics",
 }
 
 __all__ = sorted(_EXPORTS) + ["InputError", "__version__"]
@@ -74,15 +96,19 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
         rotation_vector_to_matrix,
         unwrap_rotation_vectors,
     )
-    from .detection.detectors import DetectOptions
+    from .detection.options import DetectOptions
     from .detection.pipeline import detect_video
     from .detection.result import DetectionResult
-    from .flicker.estimate import FlickerResult, estimate_line_delay_flicker
-    from .intrinsics import IntrinsicsResult, calibrate_intrinsics
+    from .flicker.options import FlickerOptions
+    from .flicker.pipeline import FlickerRun, estimate_line_delay_flicker
+    from .intrinsics.options import IntrinsicsOptions
+    from .intrinsics.pipeline import IntrinsicsRun, calibrate_intrinsics
     from .io.cameras import CameraFile, load_camera, write_camera
     from .io.targets import Target, load_target
     from .io.video import FrameSource, open_source
-    from .linedelay.linear import LinearInterpResult, calibrate_line_delay_linear
-    from .linedelay.spline import LineDelayResult, calibrate_line_delay, localize
+    from .linedelay.options import LineDelayOptions, LocalizeOptions
+    from .linedelay.pipeline import LineDelayRun, LocalizeRun, calibrate_video, localize_video
     from .observations import Observations
-    from .selfcalib.calibrate import SelfCalibResult, self_calibrate
+    from .selfcalib.options import SelfCalibOptions
+    from .selfcalib.pipeline import SelfCalibRun, self_calibrate
+    from .verdict import Verdict

@@ -81,16 +81,18 @@ def test_selfcalib_identical_across_runs(renders, tmp_path):
 
 
 def test_selfcalib_identical_across_bank_threads(renders):
-    from rscalib.selfcalib.calibrate import default_options, read_gray_frames, self_calibrate
+    from rscalib.io.video import read_gray_frames
+    from rscalib.selfcalib.engine import calibrate_frames, sog_options
+    from rscalib.selfcalib.options import SelfCalibOptions
 
     video = read_gray_frames(renders / "scene")
     frames = list(video.frames)[:30]
     results = []
     for threads in (1, 2):
-        options = default_options()
+        options = sog_options(SelfCalibOptions())
         options.num_threads = threads
-        results.append(self_calibrate(frames, video.image_size, pixel_size_mm=0.0112, options=options,
-                                      restarts=False))
+        results.append(calibrate_frames(frames, video.image_size, SelfCalibOptions(pixel_size_mm=0.0112, restarts=False),
+                                        sog=options))
     one, two = results
     assert one.gaussians_left > 0 and len(one.history) == 30
     np.testing.assert_array_equal(one.mean, two.mean)

@@ -101,7 +101,25 @@ def image_size(text: str) -> str:
 
 # Ranges shared by several commands
 PIXEL_SIGMA = number(1e-4, 100.0, " px")            # detection noise: 0.0001 px is beyond any detector
-LINE_DELAY_S = number(-0.01, 0.01, " s/row")         # 10 ms a row: a 100-row sensor read in a second
+
+
+def line_delay(low: float, high: float, *, low_open: bool = False) -> Callable[[str], float]:
+    """A converter to a line delay in s/row, given with a unit per row (30us, 0.03ms, 30000ns) or as
+    a plain number in s/row (3e-5), in [low, high] ((low, high] with low_open): the one way every
+    command takes a line delay."""
+    def convert(text: str) -> float:
+        bare = re.sub(r"\s*/\s*row\s*$", "", text.strip())   # "30us/row" reads as "30us"
+        try:
+            value = seconds_in(low, high, low_open=low_open)(bare)
+        except argparse.ArgumentTypeError as error:
+            raise argparse.ArgumentTypeError(str(error).replace("not a time", "not a line delay")
+                                             .replace(" s,", " s/row,").replace("(e.g. 30e-6, 30us, 5ms)",
+                                                                                "(e.g. 30us, 3e-5 s/row)")) from None
+        return value
+    return convert
+
+
+LINE_DELAY = line_delay(-0.01, 0.01)         # 10 ms a row: a 100-row sensor read in a second
 ROWS = whole(1, 100_000, " rows")
 FRAMES = whole(1, 10_000_000, " frames")
 FOCAL_PX = number(0.0, 1e7, " px", low_open=True)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .._version import __version__
 from ..io.output_folder import check_output_folder, expected_output_bytes
-from .common import EXIT_OK, number, seed
+from .common import line_delay, number, seed
 
 
 def add_parser(sub) -> None:
@@ -18,7 +18,10 @@ def add_parser(sub) -> None:
                           description="Render a synthetic rolling-shutter video with a known line delay, "
                                       "calibrate it (detection, trajectory, line delay, report) and print truth "
                                       "vs estimate.")
-    demo.add_argument("--line-delay-us", type=number(0.0, 1e4, " us/row", low_open=True), default=30.0, help="true line delay in us/row (30)")
+    demo.add_argument("--line-delay", type=line_delay(0.0, 0.01, low_open=True), default=30e-6, metavar="DELAY",
+                      help="true line delay per row, with a unit (30us) or in s/row (default 30us)")
+    demo.add_argument("--line-delay-us", type=number(0.0, 1e4, " us/row", low_open=True), default=None,
+                      help=argparse.SUPPRESS)   # the flag of earlier versions
     demo.add_argument("--duration", type=number(0.5, 600.0, " s"), default=4.0, help="seconds of video (4)")
     demo.add_argument("--seed", type=seed, default=0, help="random seed of the motion and noise (0)")
     demo.add_argument("--out", default=None, help="folder for the video and results (default: a new temp folder)")
@@ -38,18 +41,20 @@ def _detection_printer(detection) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..linedelay.options import LineDelayOptions
+    from ..linedelay.pipeline import calibrate_video
+
     started = time.perf_counter()
-    line_delay_s = args.line_delay_us * 1e-6
+    line_delay_s = args.line_delay if args.line_delay_us is None else args.line_delay_us * 1e-6
     if args.out:   # the rendered video (raw size, generously), its detection cache and the report
         frames = 0 if args.observations_only else args.duration * 30.0
         check_output_folder(args.out, expected_output_bytes(64, extra_bytes=frames * 640 * 480 * 1.5))
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="rscalib-demo-"))
     out.mkdir(parents=True, exist_ok=True)
     print(f"rscalib {__version__} demo: {args.duration:g} s of hand-held 30 fps video of a 9x6 checkerboard, "
-          f"640x480, rolling shutter d = {args.line_delay_us:g} us/row")
+          f"640x480, rolling shutter d = {line_delay_s * 1e6:g} us/row")
     if args.observations_only:
         from .._core import CameraModel
-        from ..linedelay.spline import calibrate_line_delay
         from ..sim import target_observations as simulate
 
         sim = simulate.simulate_default(line_delay_s=line_delay_s, duration_s=args.duration, seed=args.seed)
@@ -57,20 +62,22 @@ def run(args: argparse.Namespace) -> int:
         camera = CameraModel(c.model, c.params, c.width, c.height)
         print(f"  simulated {sim.observations.num_observations} corner observations (exact RS projection, "
               "0.3 px noise)")
-        video_run = None
-        result = calibrate_line_delay(sim.observations, camera, progress=_round_printer)
+        # the engine alone, as before the self-check existed: seconds, for a first look
+        run = calibrate_video(sim.observations, camera=camera, options=LineDelayOptions(self_check=False),
+                              on_round=_round_printer)
     else:
-        from ..linedelay.pipeline import calibrate_video
+        from ..detection.options import DetectOptions
         from ..sim.target_video import render_video
 
         video = out / "video"
         print(f"  rendering into {video} (every row at its own time) ...")
         render_video(video, line_delay_s=line_delay_s, duration_s=args.duration, seed=args.seed, supersample=2,
                      progress=True)
-        video_run = calibrate_video(video / "video.avi", video / "target.yaml", video / "camera.yaml",
-                                    cache_dir=out / "cache", progress=True, on_detection=_detection_printer,
-                                    on_round=_round_printer)
-        result, camera = video_run.result, video_run.camera
+        run = calibrate_video(video / "video.avi", video / "target.yaml", video / "camera.yaml",
+                              LineDelayOptions(detection=DetectOptions(cache_dir=out / "cache")), progress=True,
+                              on_detection=_detection_printer, on_round=_round_printer)
+        camera = run.camera
+    result = run.result
     error = result.line_delay_s - line_delay_s
     std = result.line_delay_std_s
     print(f"  truth     d = {line_delay_s * 1e6:.3f} us/row  (readout {line_delay_s * camera.height * 1e3:.3f} ms)")
@@ -81,10 +88,9 @@ def run(args: argparse.Namespace) -> int:
               f"(estimated), J/2N {result.normalised_cost:.3f}, rms {result.rms_px:.3f} px")
     for w in result.warnings:
         print(f"  warning: {w}")
-    if video_run is not None:
-        from ..linedelay.report import write_video_outputs
-
-        write_video_outputs(video_run, out / "result", command="demo")
+    print(f"  verdict: {run.verdict.headline}")
+    if not args.observations_only:
+        run.write(out / "result", command="demo")
         print(f"  report: {out / 'result' / 'report.html'}")
     print(f"  took {time.perf_counter() - started:.1f} s")
-    return EXIT_OK
+    return run.verdict.exit_code

@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 import argparse
-import json
-from dataclasses import replace
+from pathlib import Path
 
-from .common import EXIT_OK, number, whole, workers
+from ..detection.options import DetectOptions
+from ..intrinsics.options import MODELS, IntrinsicsOptions
+from .common import number, whole, workers
 
 
 def add_parser(sub) -> None:
@@ -20,13 +21,12 @@ def add_parser(sub) -> None:
                    help="a video, an image folder, or image files (shell glob or quoted pattern)")
     p.add_argument("--target", required=True, metavar="TARGET.yaml", help="Kalibr-style target file")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--model", choices=["pinhole-radtan", "pinhole-equidistant"], default="pinhole-radtan",
-                   help="camera model (pinhole-radtan)")
-    p.add_argument("--max-views", type=whole(3, 10_000, " views"), default=40, metavar="N",
-                   help="use at most N views, chosen sharp and well spread (40)")
+    p.add_argument("--model", choices=MODELS, default=None, help=f"camera model ({IntrinsicsOptions.model})")
+    p.add_argument("--max-views", type=whole(3, 10_000, " views"), default=None, metavar="N",
+                   help=f"use at most N views, chosen sharp and well spread ({IntrinsicsOptions.max_views})")
     p.add_argument("--workers", type=workers, default=None, metavar="N", help="detection processes (all cores)")
     p.add_argument("--max-blur-px", type=number(0.0, 100.0, " px", low_open=True), default=None, metavar="PX",
-                   help="drop frames whose edges are wider than this (8)")
+                   help=f"drop frames whose edges are wider than this ({DetectOptions.max_blur_px:g})")
     p.add_argument("--subpix-window", type=whole(1, 50, " px"), default=None, metavar="PX",
                    help="cornerSubPix half-window (default: a quarter of the grid step; OpenCV's sample uses 11)")
     p.add_argument("--no-cache", action="store_true", help="detect again even if cached detections exist")
@@ -49,44 +49,29 @@ def lens_profile_names(args: argparse.Namespace) -> dict:
             "lens_model": args.lens_model.strip()}
 
 
-def run(args: argparse.Namespace) -> int:
-    from ..detection.detectors import DetectOptions
-    from ..detection.pipeline import detect_video
-    from ..errors import InputError
-    from ..intrinsics import calibrate_intrinsics, write_intrinsics
-    from ..io.limits import bounded_workers
-    from ..io.output_folder import check_output_folder, expected_output_bytes
-    from ..io.targets import load_target
-    from ..io.video import open_source
+def intrinsics_options(args: argparse.Namespace) -> IntrinsicsOptions:
+    """IntrinsicsOptions from the flags of `rscalib intrinsics` (only the flags typed)."""
+    detection = DetectOptions(**{k: v for k, v in dict(
+        max_blur_px=args.max_blur_px, subpix_window_px=args.subpix_window, workers=args.workers,
+        cache=False if args.no_cache else None, cache_dir=args.cache_dir).items() if v is not None})
+    return IntrinsicsOptions(**{k: v for k, v in dict(model=args.model, max_views=args.max_views).items()
+                                if v is not None}, detection=detection)
 
-    if args.max_views < 3:
-        raise InputError("--max-views must be at least 3")
-    if args.workers is not None and args.workers < 1:
-        raise InputError("--workers must be at least 1")
-    target = load_target(args.target)
-    options = DetectOptions()
-    if args.max_blur_px is not None:
-        if not args.max_blur_px > 0:
-            raise InputError("--max-blur-px must be positive")
-        options = replace(options, max_blur_px=args.max_blur_px)
-    if args.subpix_window is not None:
-        if args.subpix_window < 1:
-            raise InputError("--subpix-window must be at least 1")
-        options = replace(options, subpix_window_px=args.subpix_window)
+
+def run(args: argparse.Namespace) -> int:
+    from ..intrinsics.pipeline import calibrate_intrinsics
+    from ..io.output_folder import check_output_folder, expected_output_bytes
+
+    options = intrinsics_options(args)
     check_output_folder(args.out, expected_output_bytes(32, list(args.inputs), per_input_byte=0.1))
     source = args.inputs[0] if len(args.inputs) == 1 else args.inputs
-    workers = bounded_workers(open_source(source), args.workers)   # frame sizes from headers, before decoding
-    detections = detect_video(source, target, workers=workers, cache=not args.no_cache,
-                              cache_dir=args.cache_dir, progress=not args.quiet, options=options)
-    result = calibrate_intrinsics(detections, model=args.model, max_views=args.max_views)
-    camera_path, json_path = write_intrinsics(result, args.out, detections,
-                                              extra={"target": {"target_type": target.target_type, **target.spec}},
-                                              inputs={"images": [str(i) for i in args.inputs], "target": args.target},
-                                              gyroflow=lens_profile_names(args))
+    run_ = calibrate_intrinsics(source, args.target, options, progress=not args.quiet)
+    summary = run_.write(args.out, lens_profile=lens_profile_names(args))
+    result, detections = run_.result, run_.detection
 
     dropped = ", ".join(f"{n} {r.replace('_', ' ')}" for r, n in sorted(detections.dropped.items())) or "none"
     cached = " (cached)" if detections.from_cache else ""
-    print(f"{target.describe()}: {detections.frames_total} frames, {detections.frames_detected} with the target"
+    print(f"{run_.target.describe()}: {detections.frames_total} frames, {detections.frames_detected} with the target"
           f"{cached}; dropped: {dropped}; {len(result.view_index)} views used")
     print(f"  {result.model}, {result.camera.width}x{result.camera.height}, RMS {result.rms_px:.3f} px")
     for name, value, std in zip(result.param_names, result.params, result.param_std):
@@ -96,9 +81,9 @@ def run(args: argparse.Namespace) -> int:
     print("  largest per-view RMS: " + ", ".join(f"{label} {e:.3f} px" for e, label in worst))
     for warning in detections.warnings + result.warnings:
         print(f"  warning: {warning}")
-    summary = json.loads(json_path.read_text())
     for note in summary.get("export_notes", []):
         print(f"  note: {note}")
     others = [name for role, name in summary["files"].items() if role != "opencv_yaml"]
+    camera_path, json_path = Path(args.out) / "camera.yaml", Path(args.out) / "result.json"
     print(f"  wrote {camera_path}, {json_path} and, for other tools, {', '.join(others)} in {args.out}")
-    return EXIT_OK
+    return run_.verdict.exit_code

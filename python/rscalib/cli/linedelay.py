@@ -6,17 +6,16 @@ rscalib.linedelay.report, print the result; docs/architecture.md has the data pa
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
 from ..errors import InputError
+from ..linedelay.options import LOCALIZE_MODELS, ROBUST_LOSSES, LineDelayOptions, LocalizeOptions
+from ..readout import AUTO, READOUT_DIRECTIONS, readout_direction
+from ..verdict import NOT_DETERMINED
 from .common import (
     CAPTURE_GUIDE,
-    EXIT_NOT_TRUSTED,
-    EXIT_OK,
-    EXIT_UNDETERMINED,
-    LINE_DELAY_S,
+    LINE_DELAY,
     PIXEL_SIGMA,
     ROWS,
     number,
@@ -50,8 +49,8 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="output folder (created)")
     p.add_argument("--pixel-sigma", type=PIXEL_SIGMA, default=None,
                    help="detection noise in px (default: estimated from the target grid)")
-    p.add_argument("--robust", choices=["none", "huber", "cauchy"], default="none",
-                   help="robust loss on the standardised errors, against bad detections (none)")
+    p.add_argument("--robust", choices=ROBUST_LOSSES, default=None,
+                   help=f"robust loss on the standardised errors, against bad detections ({LineDelayOptions.robust_loss})")
     p.add_argument("--rows", type=ROWS, default=None, help="sensor rows read out (default: image height)")
     p.add_argument("--workers", type=workers, default=None, help="detection processes (default: all cores)")
     p.add_argument("--no-cache", action="store_true", help="re-run detection even if cached")
@@ -69,24 +68,23 @@ def add_parser(sub) -> None:
     _add_common(p)
     p.add_argument("--start", type=number(), default=None, metavar="S", help="use frames from S seconds on")
     p.add_argument("--end", type=number(), default=None, metavar="S", help="use frames up to S seconds")
-    p.add_argument("--readout", choices=["auto", "top-down", "bottom-up", "left-right", "right-left"], default="auto",
-                   help="sensor readout direction in the image (auto: top-down, or from a portrait video's rotation "
-                        "metadata, which turns sensor rows into image columns)")
+    p.add_argument("--readout", type=readout_flag, default=None, metavar="|".join((AUTO,) + READOUT_DIRECTIONS),
+                   help="sensor readout direction in the image (auto: top-to-bottom, or from a portrait video's "
+                        "rotation metadata, which turns sensor rows into image columns)")
     p.add_argument("--min-segment-ms", type=number(0.0, 1e6, " ms", low_open=True), default=None, metavar="MS",
                    help="shortest knot segment the adaptation may create (default: half a frame, at most 16.7 ms)")
     p.add_argument("--no-self-check", action="store_true",
                    help="do not solve the two halves of the video separately (faster; the error bar is not checked)")
-    p.add_argument("--max-rounds", type=whole(1, 100), default=8, help="knot-adaptation rounds at most (8)")
+    p.add_argument("--max-rounds", type=whole(1, 100), default=None,
+                   help=f"knot-adaptation rounds at most ({LineDelayOptions.max_rounds})")
     p.add_argument("--no-report", action="store_true",
                    help="no plots and no report.html (batch use): result.json, trajectories and camera files only")
     add_lens_profile_options(p)
-    advanced = p.add_argument_group("advanced (baselines and ablations for experiments; the defaults are the method)")
-    advanced.add_argument("--noise-model", choices=["frame", "video"], default="frame",
-                          help="frame: a sigma per frame plus repeating errors learnt from the residuals (default); "
-                               "video: one sigma for the whole video (the old model)")
+    advanced = p.add_argument_group("advanced (the paper's baseline and ablations, for comparisons; the defaults "
+                                    "are the method)")
     advanced.add_argument("--trajectory", choices=["spline", "linear"], default="spline",
-                          help="trajectory model: a smooth curve through time (spline, default) or the baseline of "
-                               "per-frame poses interpolated linearly between frames (linear)")
+                          help="trajectory model: a smooth curve through time (spline, the method) or the baseline "
+                               "of per-frame poses interpolated linearly between frames (linear, Hedborg et al. 2012)")
     advanced.add_argument("--uniform-knots", type=whole(1, MAX_UNIFORM_KNOTS, " segments"), default=None, metavar="N",
                           help="spline only: N equal time segments, no adaptation to the motion")
     advanced.add_argument("--no-standardise", action="store_true",
@@ -110,41 +108,52 @@ def add_parser(sub) -> None:
                                    "trajectory.csv (world-to-camera) and trajectory_tum.txt (TUM format, "
                                    "camera-to-world).")
     _add_common(q)
-    q.add_argument("--line-delay", type=LINE_DELAY_S, default=None,
-                   help="line delay in s/row (default: from the camera file, if it has one)")
-    q.add_argument("--model", choices=["rs-spline", "gs-pnp"], default="rs-spline",
-                   help="rs-spline: continuous-time rolling-shutter trajectory (default); gs-pnp: per-frame "
-                        "global-shutter PnP poses, written in the same trajectory.csv format for comparison")
+    q.add_argument("--line-delay", type=LINE_DELAY, default=None, metavar="DELAY",
+                   help="line delay per row, with a unit (30us, 0.03ms) or in s/row (3e-5) "
+                        "(default: from the camera file, if it has one)")
+    q.add_argument("--model", choices=LOCALIZE_MODELS, default=None,
+                   help=f"rs-spline: continuous-time rolling-shutter trajectory ({LocalizeOptions.model}, the "
+                        "default); gs-pnp: per-frame global-shutter PnP poses, written in the same trajectory.csv "
+                        "format for comparison")
     q.set_defaults(func=run_localize)
 
 
-def _check_flags(args) -> None:
-    """One-line errors for option values that mean nothing (before the slow detection)."""
-    if args.pixel_sigma is not None and not args.pixel_sigma > 0:
-        raise InputError("--pixel-sigma must be positive")
-    if args.rows is not None and args.rows <= 0:
-        raise InputError("--rows must be positive")
-    if getattr(args, "uniform_knots", None) is not None and args.uniform_knots < 1:
-        raise InputError("--uniform-knots must be at least 1")
-    if getattr(args, "max_rounds", 1) < 1:
-        raise InputError("--max-rounds must be at least 1")
-    if getattr(args, "line_delay", None) is not None and not math.isfinite(args.line_delay):
-        raise InputError("--line-delay must be a finite number")
-    if getattr(args, "min_segment_ms", None) is not None and not args.min_segment_ms > 0:
-        raise InputError("--min-segment-ms must be positive")
-    for flag in ("start", "end"):
-        value = getattr(args, flag, None)
-        if value is not None and not math.isfinite(value):
-            raise InputError(f"--{flag} must be a number of seconds")
+def readout_flag(text: str) -> str:
+    """--readout: auto or a readout direction (rscalib.readout; the earlier words are read too)."""
+    try:
+        return readout_direction(text, READOUT_DIRECTIONS, auto=True)
+    except InputError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
-def _refine_options(args) -> dict:
-    """--refine-intrinsics and its prior, only when given (the default call is unchanged)."""
-    if getattr(args, "intrinsics_prior", None) is not None and not args.refine_intrinsics:
-        raise InputError("--intrinsics-prior needs --refine-intrinsics")
-    if not getattr(args, "refine_intrinsics", False):
-        return {}
-    return {"refine_intrinsics": True, "intrinsics_prior": args.intrinsics_prior}
+def _typed(**values) -> dict:
+    """The options a user typed: flags left at None (not given) are not passed, so the defaults
+    stay in the options classes."""
+    return {k: v for k, v in values.items() if v is not None}
+
+
+def _detection_options(args):
+    from ..detection.options import DetectOptions
+
+    return DetectOptions(**_typed(workers=args.workers, cache=False if args.no_cache else None))
+
+
+def line_delay_options(args) -> LineDelayOptions:
+    """LineDelayOptions from the flags of `rscalib linedelay` (batch and the CLI share this)."""
+    return LineDelayOptions(**_typed(
+        baseline="linear" if args.trajectory == "linear" else None, rows=args.rows, pixel_sigma_px=args.pixel_sigma,
+        robust_loss=args.robust, max_rounds=args.max_rounds,
+        min_segment_s=None if args.min_segment_ms is None else args.min_segment_ms * 1e-3,
+        readout=args.readout, start_s=args.start, end_s=args.end, self_check=False if args.no_self_check else None,
+        refine_intrinsics=True if args.refine_intrinsics else None, intrinsics_prior=args.intrinsics_prior,
+        uniform_knots=args.uniform_knots, standardise_errors=False if args.no_standardise else None,
+        motion_prior=False if args.no_motion_prior else None), detection=_detection_options(args))
+
+
+def localize_options(args) -> LocalizeOptions:
+    """LocalizeOptions from the flags of `rscalib localize`."""
+    return LocalizeOptions(**_typed(model=args.model, rows=args.rows, pixel_sigma_px=args.pixel_sigma,
+                                    robust_loss=args.robust), detection=_detection_options(args))
 
 
 def _say(args, text: str) -> None:
@@ -176,12 +185,6 @@ def _on_round(args):
     return report
 
 
-def _common_options(args, solving: str) -> dict:
-    return dict(rows=args.rows, pixel_sigma=args.pixel_sigma, robust_loss=args.robust, workers=args.workers,
-                cache=not args.no_cache, progress=not args.quiet, on_detection=_on_detection(args, solving),
-                on_round=_on_round(args))
-
-
 def in_flags(text: str) -> str:
     """An engine's message in the words of the command line (its options as flags)."""
     for word, flag in _FLAG_WORDS:
@@ -202,53 +205,51 @@ def _check_out(args) -> None:
     check_output_folder(args.out, expected_output_bytes(32, [args.video], per_input_byte=0.1))
 
 
+def _check_files(args) -> None:
+    """The input files before anything slow (one line each)."""
+    if not Path(args.video).exists():
+        raise InputError(f"video not found: {args.video}")
+    for name, path in (("target", args.target), ("camera", args.camera)):
+        if not Path(path).is_file():
+            raise InputError(f"{name} file not found: {path}")
+
+
 def run_linedelay(args) -> int:
     from ..linedelay.pipeline import calibrate_video
-    from ..linedelay.report import NOT_TRUSTED, UNDETERMINED, write_video_outputs
 
-    _check_flags(args)
+    options = line_delay_options(args)
+    _check_files(args)
     _check_out(args)
-    solving = ("estimating per-frame poses and line delay (linear interpolation):" if args.trajectory == "linear"
+    solving = ("estimating per-frame poses and line delay (linear interpolation):" if options.baseline == "linear"
                else "estimating trajectory and line delay:")
-    run = calibrate_video(args.video, args.target, args.camera, model=args.trajectory, max_rounds=args.max_rounds,
-                          uniform_knots=args.uniform_knots, standardise_errors=not args.no_standardise,
-                          use_motion_prior=not args.no_motion_prior, start_s=args.start, end_s=args.end,
-                          readout=args.readout, self_check=not args.no_self_check,
-                          min_segment_s=None if args.min_segment_ms is None else args.min_segment_ms * 1e-3,
-                          noise_model=args.noise_model, **_refine_options(args), **_common_options(args, solving))
+    run = calibrate_video(args.video, args.target, args.camera, options, progress=not args.quiet,
+                          on_detection=_on_detection(args, solving), on_round=_on_round(args))
     # the result is printed as soon as result.json is written, before the plots are drawn
-    summary = write_video_outputs(run, args.out, gyroflow=lens_profile_names(args), report=not args.no_report,
-                                  on_result=lambda written: _print_result(run, written))
-    status = summary["verdict"]["status"]
+    run.write(args.out, lens_profile=lens_profile_names(args), report=not args.no_report,
+              on_result=lambda written: _print_result(run, written))
     if args.no_report:
         print(f"results: {Path(args.out) / 'result.json'}")
     else:
         print(f"report: {Path(args.out) / 'report.html'}")
-    if status == UNDETERMINED:
-        return EXIT_UNDETERMINED
-    return EXIT_NOT_TRUSTED if status == NOT_TRUSTED else EXIT_OK
+    return run.verdict.exit_code
 
 
 def _print_result(run, summary: dict) -> None:
     """The line delay (or why there is none), the verdict's reasons, advice and warnings."""
-    from ..linedelay.report import TRUSTED, UNDETERMINED
-
-    result = run.result
-    status = summary["verdict"]["status"]
-    if status == UNDETERMINED:
+    result, verdict = run.result, run.verdict
+    if verdict.status == NOT_DETERMINED:
         print("line delay: not determined by this video (results written; no number is claimed); "
-              + in_flags(summary["verdict"]["reasons"][0]))
+              + in_flags(verdict.reasons[0]))
     else:
         std = result.line_delay_std_s
-        verdict = ("(linear-interpolation baseline)" if run.model == "linear"
-                   else summary["verdict"]["headline"].split(": ")[-1])
+        said = ("(linear-interpolation baseline)" if run.model == "linear" else verdict.headline.split(": ")[-1])
         image_ms = summary.get("image_readout_time_s", result.readout_time_s) * 1e3
         rows_note = "" if abs(image_ms - result.readout_time_s * 1e3) < 1e-9 else \
             f" over {result.rows} rows (image rows: {image_ms:.4f} ms)"
         print(f"line delay {result.line_delay_s * 1e6:.4f} +- {std * 1e6:.4f} us/row, readout "
               f"{result.readout_time_s * 1e3:.4f} ms{rows_note}; J/2N {result.normalised_cost:.3f}"
-              + (" " if run.model == "linear" else "; ") + verdict)
-        for reason in summary["verdict"]["reasons"]:
+              + (" " if run.model == "linear" else "; ") + said)
+        for reason in verdict.reasons:
             print(f"  because: {in_flags(reason)}")
     refined = summary.get("intrinsics")
     if refined:
@@ -258,19 +259,19 @@ def _print_result(run, summary: dict) -> None:
     for advice in (summary.get("guidance") or {}).get("advice", []):
         print(f"  to film better: {advice}")
     _print_warnings(summary)
-    if status != TRUSTED:
+    if not verdict.trusted:
         print(f"  how to film a better video: {CAPTURE_GUIDE}")
 
 
 def run_localize(args) -> int:
     from ..linedelay.pipeline import localize_video
-    from ..linedelay.report import write_video_outputs
 
-    _check_flags(args)
+    options = localize_options(args)
+    _check_files(args)
     _check_out(args)
-    run = localize_video(args.video, args.target, args.camera, model=args.model, line_delay_s=args.line_delay,
-                         **_common_options(args, ""))
-    summary = write_video_outputs(run, args.out)
+    run = localize_video(args.video, args.target, args.camera, args.line_delay, options, progress=not args.quiet,
+                         on_detection=_on_detection(args, ""), on_round=_on_round(args))
+    summary = run.write(args.out)
     result = run.result
     if run.model == "gs-pnp":
         print(f"per-frame GS PnP: {result.frames_used} poses, rms {result.rms_px:.3f} px")
@@ -281,4 +282,4 @@ def run_localize(args) -> int:
               f"mean RS-vs-GS camera-centre difference {comparison['mean_centre_difference_m'] * 1e3:.2f} mm")
     _print_warnings(summary)
     print(f"results: {Path(args.out) / 'result.json'}")
-    return EXIT_OK
+    return run.verdict.exit_code

@@ -151,7 +151,7 @@ def run_led(args: argparse.Namespace) -> int:
 
 def run_scene(args: argparse.Namespace) -> int:
     """`--scene`: a self-calibration sequence (rscalib.sim.scene_video) with its truth."""
-    from ..selfcalib.prior import PAPER_CAMERA_PARAMS, PAPER_PIXEL_SIZE_MM
+    from ..reference_cameras import PAPER_CAMERA_PARAMS, PAPER_PIXEL_SIZE_MM
     from ..sim.scene_video import render_scene_sequence
 
     if not (args.duration > 0 and args.fps > 0):

@@ -28,15 +28,15 @@ is black, so their ids survive any rotation. Markers fix the ids of aprilgrids a
 """
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Optional
 
 import cv2
 import numpy as np
 
 from ..io.targets import APRILGRID_BORDER_BITS, APRILGRID_DICTIONARY, Target
+from .options import DetectOptions
 from .quality import edge_width_px, local_homography_residual
 
 # Bump when a change to the detectors or checks changes their output: it invalidates caches.
@@ -44,23 +44,6 @@ DETECTOR_VERSION = "2"  # 2: runs by frame index, tracks across frames without a
 
 DROP_REASONS = ("no_target", "wrong_count", "blur", "outlier_geometry", "outer_ring", "bad_timestamp",
                 "unreadable", "image_size", "detector_error")
-
-
-@dataclass(frozen=True)
-class DetectOptions:
-    """Detector settings that change the result (they are part of the cache key)."""
-
-    max_blur_px: float = 8.0            # edge width (contrast / steepest slope) of a sharp frame, px
-    max_residual: float = 0.3           # local-homography residual, in grid steps
-    min_points: int = 8                 # partial views (aprilgrid, charuco) with fewer are dropped
-    max_search_side_px: int = 1280      # checkerboards: search on a downscaled copy above this
-    subpix_window_px: Optional[int] = None  # cornerSubPix half-window; None: from the grid step
-    check_outer_ring: bool = True       # checkerboards: the squares around the found grid must alternate
-    refine_circles: bool = True         # circle grids: grey-level centroid instead of the blob detector's
-    full_detection_every: int = 20      # checkerboards in videos: track between full detections (tracking.py); 1 = off
-
-    def fingerprint(self) -> str:
-        return json.dumps(asdict(self), sort_keys=True)
 
 
 @dataclass

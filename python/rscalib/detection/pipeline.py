@@ -20,24 +20,25 @@ from typing import Iterator, Optional, Sequence, Union
 import cv2
 import numpy as np
 
-from .._progress import Progress
+from .._progress import Progress, ProgressArg
 from ..io.limits import bounded_workers, usable_cores
 from ..io.targets import Target, load_target
 from ..io.video import FrameSource, VideoSegment, open_source
 from ..observations import Observations
 from .cache import default_cache_dir, load_cache, save_cache
-from .detectors import DETECTOR_VERSION, DROP_REASONS, DetectOptions, Detector, FrameDetection
+from .detectors import DETECTOR_VERSION, DROP_REASONS, Detector, FrameDetection
+from .options import DetectOptions
 from .result import DetectionResult
 from .tracking import RunDetector, detect_run, run_length
 
 
-def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, Path], *,
-                 workers: Optional[int] = None, cache: bool = True, cache_dir: Union[str, Path, None] = None,
-                 progress: bool = True, options: Optional[DetectOptions] = None) -> DetectionResult:
+def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, Path],
+                 options: Optional[DetectOptions] = None, *, progress: ProgressArg = True) -> DetectionResult:
     """Detect `target` in every frame of a video, an image folder (file-name order, optional
     timestamps.txt) or a list of image files.
 
-    workers: processes (default: the usable cores; in this process for under 64 frames). A video
+    options: DetectOptions (None: the defaults): the detector's settings, and how it runs.
+    options.workers: processes (default: the usable cores; in this process for under 64 frames). A video
     of at least 4 runs per worker is cut into segments of whole runs (checkerboards are tracked
     within a run: tracking.py) that the workers decode themselves (segment_plan); each segment's
     seek is verified against the frame the segment before it decoded next, and if one is not,
@@ -46,20 +47,20 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
     way memory does not grow with the length, and the result is that of one sequential pass,
     whatever the number of workers. Workers are spawned (not forked), so a calling script needs
     the usual `if __name__ == "__main__":` guard.
-    cache: reuse / store the result under cache_dir (default_cache_dir()), keyed by the hash of
-    the source's bytes, the target definition, the options and DETECTOR_VERSION."""
+    options.cache: reuse / store the result under options.cache_dir (default_cache_dir()), keyed by
+    the hash of the source's bytes, the target definition, the detector's settings and DETECTOR_VERSION."""
     if not isinstance(target, Target):
         target = load_target(target)
     options = options or DetectOptions()
     frames = open_source(source)
-    workers = bounded_workers(frames, workers)  # frame sizes from the headers: refused or bounded before decoding
+    workers = bounded_workers(frames, options.workers)  # frame sizes from the headers: refused or bounded before decoding
     started = time.perf_counter()
     cache_file = None
     cache_problems: list = []   # a bad cache file: one line each, reported with the result
-    if cache:
+    if options.cache:
         key = hashlib.sha256("\n".join([frames.content_hash(), target.fingerprint(), options.fingerprint(),
                                         DETECTOR_VERSION]).encode()).hexdigest()[:32]
-        cache_file = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+        cache_file = Path(options.cache_dir) if options.cache_dir is not None else default_cache_dir()
         cache_file = cache_file / f"{key}.npz"
         cached = load_cache(cache_file, target, cache_problems)
         if cached is not None:

@@ -34,3 +34,15 @@ class DetectionResult:
     timestamps: str
     warnings: list = field(default_factory=list)
     detect_time_s: float = 0.0
+
+    @classmethod
+    def from_observations(cls, observations: Observations, timestamps: str = "given") -> DetectionResult:
+        """Detections made elsewhere (another detector, a simulation) as a DetectionResult: every
+        frame of `observations` detected, none dropped, no blur measured."""
+        if not isinstance(observations, Observations):
+            raise TypeError("observations must be an rscalib.Observations")
+        frames = observations.num_frames
+        return cls(observations=observations, frames_total=frames, frames_detected=frames, dropped={},
+                   from_cache=False, image_size=tuple(int(x) for x in observations.image_size),
+                   frame_numbers=np.arange(frames), frame_labels=[f"frame {k}" for k in range(frames)],
+                   blur_px=np.full(frames, np.nan), timestamps=timestamps)

@@ -37,7 +37,8 @@ import cv2
 import numpy as np
 
 from ..io.targets import Target
-from .detectors import DetectOptions, Detector, FrameDetection, grid_reindexings
+from .detectors import Detector, FrameDetection, grid_reindexings
+from .options import DetectOptions
 
 TRACKED_TARGETS = ("checkerboard",)
 MAX_SHIFT_STEPS = 0.45  # largest refinement shift from the prediction, in grid steps

@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
+from .limits import check_source_memory
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pbm", ".webp", ".jp2")
 TIMESTAMPS_FILE = "timestamps.txt"
@@ -351,3 +352,35 @@ def _video_source(path: Path) -> FrameSource:
     count = int(count) if count and np.isfinite(count) and count > 0 else None
     fps = float(fps) if fps and np.isfinite(fps) and fps > 0 else None
     return FrameSource("video", [path], "container", count, fps)
+
+
+@dataclass
+class GrayFrames:
+    """The readable frames of a video or image folder: ``frames`` yields (time s, grayscale image)."""
+
+    frames: Iterator[tuple[float, np.ndarray]]
+    image_size: tuple[int, int]
+    timestamps_from: str                 # how the times were obtained (rscalib.io.video.FrameSource)
+    frame_count_estimate: Optional[int]
+
+
+def read_gray_frames(source) -> GrayFrames:
+    """Open a video file or image folder (:func:`rscalib.io.video.open_source`); its image size is
+    that of the first readable frame. Unreadable frames are left out."""
+    opened = open_source(source)
+    check_source_memory(opened)   # from the headers: a huge frame is refused before it is decoded
+    frames = opened.frames(gray=True)
+    first = next(frames, None)
+    while first is not None and first.image is None:
+        first = next(frames, None)
+    if first is None:
+        raise InputError(f"{source}: no readable frames")
+    height, width = first.image.shape[:2]
+
+    def readable():
+        yield first.time_s, first.image
+        for frame in frames:
+            if frame.image is not None:
+                yield frame.time_s, frame.image
+
+    return GrayFrames(readable(), (width, height), opened.timestamps_source, opened.frame_count_estimate)

@@ -15,6 +15,8 @@ from ..observations import Observations
 from .noise import estimate_pixel_sigma
 from .pnp import FramePoses, per_frame_pnp
 
+# Threads of a Ceres solve (both trajectory models).
+SOLVER_THREADS = 2
 # The line delay counts as determined when its standard deviation is below this fraction
 # of the nominal full-frame delay 1 / (fps * rows) (a readout-time error of 5 % of a frame).
 UNDETERMINED_STD_FRACTION = 0.05

@@ -25,6 +25,7 @@ from .._core import CameraModel
 from ..errors import InputError
 from ..observations import Observations
 from .common import (
+    SOLVER_THREADS,
     assess_noise_and_determinacy,
     check_solve_memory,
     choose_pixel_sigma,
@@ -33,6 +34,7 @@ from .common import (
     solve_warnings,
     summary_fields,
 )
+from .options import LineDelayOptions
 from .pnp import FramePoses
 
 TRAJECTORY_MODEL = "linear"
@@ -135,21 +137,20 @@ class LinearInterpResult:
                                  max_frame_interval_s=self.max_frame_interval_s)}
 
 
-def calibrate_line_delay_linear(observations: Observations, camera: CameraModel, rows: Optional[int] = None, *,
-                                pixel_sigma: Optional[float] = None,
+def calibrate_line_delay_linear(observations: Observations, camera: CameraModel,
+                                options: Optional[LineDelayOptions] = None, *,
                                 line_delay0_s: Optional[float] = None,
-                                standardise_errors: bool = False,
-                                max_frame_interval_s: Optional[float] = None,
-                                robust_loss: str = "none",
-                                num_threads: int = 2) -> LinearInterpResult:
-    """Line delay d (s/row) with the per-frame linear/SLERP trajectory (the baseline).
+                                max_frame_interval_s: Optional[float] = None) -> LinearInterpResult:
+    """Line delay d (s/row) with the per-frame linear/SLERP trajectory: the baseline of
+    `LineDelayOptions(baseline="linear")`, the plain method (unstandardised errors).
 
-    Same inputs as rscalib.calibrate_line_delay. standardise_errors: weight with A R A^T as
-    the spline model does (default False: the plain method). max_frame_interval_s: frames
-    further apart are not interpolated between (default 1.5 median frame intervals).
+    options: rows, pixel_sigma_px and robust_loss are read (LineDelayOptions; None: the defaults).
+    max_frame_interval_s: frames further apart are not interpolated between (default 1.5 median
+    frame intervals).
     """
+    options = options or LineDelayOptions()
     started = time.perf_counter()
-    rows, fps, nominal_delay_s, d = initial_values(observations, camera, rows, line_delay0_s)
+    rows, fps, nominal_delay_s, d = initial_values(observations, camera, options.rows, line_delay0_s)
     warnings: list[str] = []
     if not math.isfinite(d):
         raise InputError("line_delay0_s must be a finite number")
@@ -162,17 +163,17 @@ def calibrate_line_delay_linear(observations: Observations, camera: CameraModel,
     frames_total = observations.num_frames
     check_solve_memory(len(observations.uv))
     used, gs = seed_poses(observations, camera, warnings, min_frames=2)
-    sigma, sigma_source = choose_pixel_sigma(used, pixel_sigma)
+    sigma, sigma_source = choose_pixel_sigma(used, options.pixel_sigma_px)
 
-    options = _core.LinearInterpOptions()
-    options.pixel_sigma = sigma
-    options.standardise_errors = bool(standardise_errors)
-    options.max_frame_interval_s = float(max_frame_interval_s)
-    options.robust_loss = robust_loss
-    options.num_threads = int(num_threads)
+    solver = _core.LinearInterpOptions()
+    solver.pixel_sigma = sigma
+    solver.standardise_errors = False
+    solver.max_frame_interval_s = float(max_frame_interval_s)
+    solver.robust_loss = options.robust_loss
+    solver.num_threads = SOLVER_THREADS
     initial_poses = np.c_[gs.translation, gs.rotation_vector]
     summary, refined = _core.solve_line_delay_linear(used.frame_index.astype(np.int32), used.uv, used.points_w(),
-                                                     used.frame_times_s, camera, initial_poses, d, options)
+                                                     used.frame_times_s, camera, initial_poses, d, solver)
     d = summary.line_delay_s
     std = summary.line_delay_std_s
     frame_times = used.frame_times_s

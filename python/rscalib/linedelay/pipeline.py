@@ -1,11 +1,13 @@
-"""Video -> line-delay result: the one path of `rscalib linedelay` and `rscalib localize`, and of the
-experiments in benchmarks/ (their `_exp_common.detect` is `detect` here).
+"""The front door of the line-delay job: a video of a target -> a line delay with its verdict, and
+the files. `rscalib linedelay`, `rscalib localize`, `rscalib demo`, `rscalib batch` and the experiments
+all run :func:`calibrate_video` / :func:`localize_video`; ``rscalib.calibrate_video`` is this one.
 
-    check the input files -> load the camera (rscalib.io.cameras) and the target (rscalib.io.targets)
-    -> detect the target in every frame (rscalib.detection.pipeline.detect_video) -> check the sizes
-    -> estimate the line delay with the chosen trajectory model (calibrate_video: spline, linear)
-       or, with a known line delay, the trajectory (localize_video: rs-spline, gs-pnp)
-    -> VideoResult, whose outputs linedelay/report.py writes (write_video_outputs).
+    the files -> camera (rscalib.io.cameras) and target (rscalib.io.targets) -> the target detected
+    in every frame (rscalib.detection.pipeline.detect_video; or detections already made) -> the frames
+    of the --start/--end window, turned to a top-to-bottom readout (readout.py) -> the two halves
+    solved apart and the whole video from them (spline.py, selfcheck.py; or the linear baseline,
+    linear.py) -> the advice on filming (guidance.py) -> the verdict (judge.py)
+    -> LineDelayRun, whose .write(out_dir) writes what the CLI writes (report.py).
 
 Never prints: detection progress goes through `progress` (rscalib._progress: True for a bar on
 stderr, or a callable (done, total)); `on_detection(detection)` is called once the detections are in,
@@ -14,7 +16,7 @@ before the solve; `on_round(RoundRecord)` after each knot-adaptation round of th
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Optional, Union
 
@@ -26,9 +28,12 @@ from ..detection import probe
 from ..detection.pipeline import detect_video
 from ..detection.result import DetectionResult
 from ..errors import InputError
-from ..io.cameras import load_camera
+from ..io.cameras import CameraFile, load_camera
 from ..io.targets import Target, load_target
 from ..io.video import open_source, video_bits_per_pixel
+from ..observations import Observations
+from ..readout import AUTO, TOP_TO_BOTTOM
+from ..verdict import TRUSTED, Verdict
 from . import selfcheck
 from .common import (
     UNDETERMINED_STD_FRACTION,
@@ -39,84 +44,228 @@ from .common import (
     require_frame_times,
 )
 from .guidance import capture_guidance
+from .judge import judge_line_delay
 from .linear import LinearInterpResult, calibrate_line_delay_linear
+from .options import LineDelayOptions, LocalizeOptions
 from .pnp import PnpTrajectory, compare_with_pnp, per_frame_pnp, pnp_trajectory
-from .readout import READOUTS, rotation_hint, time_window, to_top_down
+from .readout import rotation_hint, time_window, to_top_to_bottom
 from .spline import LineDelayResult, RoundRecord, calibrate_line_delay, joined_trajectory, localize
 
-TRAJECTORY_MODELS = ("spline", "linear")    # calibrate_video: `rscalib linedelay --trajectory`
-LOCALIZE_MODELS = ("rs-spline", "gs-pnp")   # localize_video: `rscalib localize --model`
 PROBE_FIRST_DETECTED = 150   # detected frames the target-mismatch probe samples from
 
 PathLike = Union[str, Path]
 DetectionCallback = Optional[Callable[[DetectionResult], None]]
 RoundCallback = Optional[Callable[[RoundRecord], None]]
+VideoInput = Union[PathLike, DetectionResult, Observations]
+CameraInput = Union[PathLike, CameraModel, CameraFile]
 
 
 @dataclass
-class VideoResult:
-    """What calibrate_video and localize_video return: the engine's result with the detections and
-    the camera it came from.
+class LineDelayRun:
+    """What :func:`calibrate_video` returns: the line delay with its verdict, the estimate behind it,
+    the detections and camera it came from, and :meth:`write` for the files `rscalib linedelay` writes.
 
-    model: "spline" | "linear" (the line delay estimated) or "rs-spline" | "gs-pnp" (a trajectory with
-    a known line delay); result: LineDelayResult (spline, rs-spline), LinearInterpResult (linear) or
-    PnpTrajectory (gs-pnp), its warnings led by the detection's; inputs: the video, target and camera
-    files; settings: the model's options as recorded in result.json; comparison: rs-spline only,
-    against per-frame GS PnP (pnp.compare_with_pnp)."""
+    result: the engine's estimate (LineDelayResult: the spline, with its self-check; LinearInterpResult:
+    the linear baseline), its warnings led by the detection's; camera: the camera of the files (the
+    refined one with refine_intrinsics); readout: the direction used; inputs: the files it read."""
 
-    model: str
-    result: Union[LineDelayResult, LinearInterpResult, PnpTrajectory]
+    result: Union[LineDelayResult, LinearInterpResult]
+    verdict: Verdict
     camera: CameraModel
     detection: DetectionResult
+    options: LineDelayOptions
+    readout: str
     inputs: dict
-    settings: dict = field(default_factory=dict)
-    comparison: Optional[dict] = None
-    guidance: Optional[dict] = None   # linedelay.guidance.capture_guidance (linedelay runs)
+    guidance: dict = field(default_factory=dict)
+
+    command = "linedelay"
 
     @property
-    def command(self) -> str:
-        """The subcommand this run is: `linedelay` (the line delay estimated) or `localize`."""
-        return "linedelay" if self.model in TRAJECTORY_MODELS else "localize"
+    def line_delay_s(self) -> Optional[float]:
+        """The line delay in s/row, None when the video does not determine it (no number is claimed)."""
+        return self.verdict.value
 
     @property
-    def determined(self) -> bool:
-        """False when the data do not determine the line delay (a localization always is)."""
-        return bool(getattr(self.result, "determined", True))
+    def line_delay_std_s(self) -> Optional[float]:
+        return self.verdict.std
+
+    @property
+    def readout_time_s(self) -> Optional[float]:
+        """line_delay_s x rows read out (None when not determined)."""
+        return None if self.line_delay_s is None else self.line_delay_s * self.result.rows
+
+    @property
+    def model(self) -> str:
+        return "linear" if isinstance(self.result, LinearInterpResult) else "spline"
 
     @property
     def fps(self) -> float:
-        """Frames per second from the median interval of the detected frames (0 for one frame)."""
-        observations = self.detection.observations
-        if observations.num_frames < 2:
-            return 0.0
-        return float(1.0 / np.median(np.diff(observations.frame_times_s)))
+        return _fps(self.detection)
 
-    def summary_extra(self) -> dict:
-        """The result.json fields of the video and its detection, then the model's settings."""
-        d = self.detection
-        return {"video": self.inputs["video"], "detection_dropped": d.dropped, "frames_detected": d.frames_detected,
-                "timestamps_from": d.timestamps, "detection_time_s": d.detect_time_s} | self.settings \
-            | ({"guidance": self.guidance} if self.guidance is not None else {})
+    @property
+    def settings(self) -> dict:
+        """The options that shaped the estimate, as result.json records them."""
+        o = self.options
+        common = {"readout": self.readout, "start_s": o.start_s, "end_s": o.end_s}
+        if self.model == "linear":
+            return {"baseline": "linear"} | common
+        return {"trajectory_model": "spline", "standardise_errors": o.standardise_errors,
+                "motion_prior": o.motion_prior, "adaptive_knots": o.uniform_knots is None} \
+            | ({"refine_intrinsics": True} if o.refine_intrinsics else {}) | common
+
+    def summary(self) -> dict:
+        """The result.json fields (without the files and the provenance): the estimate's, the
+        detection's, the settings, the guidance and the verdict. Not determined: line_delay_s,
+        line_delay_std_s and readout_time_s are null, the unclaimed estimate under not_claimed."""
+        from .report import run_summary
+
+        return run_summary(self)
+
+    def write(self, out_dir, *, report: bool = True, lens_profile: Optional[dict] = None,
+              on_result: Optional[Callable[[dict], None]] = None, command: Optional[str] = None) -> dict:
+        """Write what `rscalib linedelay` writes into out_dir (as one set: result.json last) and
+        return the result.json dict: result.json, trajectory.csv and trajectory_tum.txt, corners.vnl,
+        camera files for other tools (OpenCV, Kalibr, Gyroflow, ROS, mrcal, COLMAP) with the line delay
+        — none when it is not determined —, and unless report=False the plots and report.html.
+        lens_profile: camera_brand, camera_model, lens_model for the Gyroflow profile; on_result(summary)
+        is called once result.json is written, before the plots are drawn."""
+        from .report import write_line_delay_run
+
+        return write_line_delay_run(self, out_dir, report=report, gyroflow=lens_profile, on_result=on_result,
+                                    command=command or self.command)
 
 
-def check_files(video: PathLike, target: PathLike, camera: PathLike) -> None:
-    """InputError (one line) when the video, the target file or the camera file is missing."""
-    if not Path(video).exists():
-        raise InputError(f"video not found: {video}")
-    for name, path in (("target", target), ("camera", camera)):
-        if not Path(path).is_file():
-            raise InputError(f"{name} file not found: {path}")
+@dataclass
+class LocalizeRun:
+    """What :func:`localize_video` returns: a trajectory with a known line delay (rs-spline:
+    LineDelayResult, with `comparison` against per-frame GS PnP; gs-pnp: PnpTrajectory)."""
+
+    result: Union[LineDelayResult, PnpTrajectory]
+    verdict: Verdict
+    camera: CameraModel
+    detection: DetectionResult
+    options: LocalizeOptions
+    inputs: dict
+    comparison: Optional[dict] = None
+
+    command = "localize"
+
+    @property
+    def model(self) -> str:
+        return self.options.model
+
+    @property
+    def fps(self) -> float:
+        return _fps(self.detection)
+
+    def write(self, out_dir, *, command: Optional[str] = None) -> dict:
+        """result.json, trajectory.csv and trajectory_tum.txt (and trajectory.png for rs-spline)."""
+        from .report import write_localize_run
+
+        return write_localize_run(self, out_dir, command=command or self.command)
 
 
-def detect(video: PathLike, target: Union[Target, PathLike], camera: CameraModel, *,
-           workers: Optional[int] = None, cache: bool = True, cache_dir: Optional[PathLike] = None,
+def _fps(detection: DetectionResult) -> float:
+    """Frames per second from the median interval of the detected frames (0 for one frame)."""
+    observations = detection.observations
+    if observations.num_frames < 2:
+        return 0.0
+    return float(1.0 / np.median(np.diff(observations.frame_times_s)))
+
+
+def calibrate_video(video: VideoInput, target: Union[None, PathLike, Target] = None,
+                    camera: Optional[CameraInput] = None, options: Optional[LineDelayOptions] = None, *,
+                    progress: ProgressArg = False, on_detection: DetectionCallback = None,
+                    on_round: RoundCallback = None) -> LineDelayRun:
+    """The line delay of a video of a target, with its verdict (`rscalib linedelay`).
+
+    video: a video file or image folder (then `target` is its target file or Target), or detections
+    already made (a DetectionResult, or rscalib.Observations with their frame times: the target is then
+    not needed); camera: its file (OpenCV, Kalibr, ROS, mrcal, COLMAP, Gyroflow) or a CameraModel;
+    options: LineDelayOptions (None: the method's defaults). The result's .line_delay_s, .verdict and
+    .write(out_dir) are what the command prints and writes."""
+    options = options or LineDelayOptions()
+    camera_model, camera_path = _camera(camera)
+    detection, video_path = _detections(video, target, camera_model, options, progress, on_detection)
+    notes = list(detection.warnings)
+    observations = time_window(detection.observations, options.start_s, options.end_s)
+    readout = options.readout
+    if readout == AUTO:
+        hint = rotation_hint(video_path) if video_path is not None else None
+        readout = hint or TOP_TO_BOTTOM
+        if hint:
+            notes.append(f"the video's rotation metadata turns the picture, so the sensor rows are not the image "
+                         f"rows: readout {hint} assumed (override with --readout)")
+    if options.refine_intrinsics and readout != TOP_TO_BOTTOM:
+        raise InputError(f"--refine-intrinsics: only with a top-to-bottom readout for now (here {readout})")
+    prior = options.intrinsics_prior
+    if options.refine_intrinsics and prior is not None and not isinstance(prior, IntrinsicsPrior):
+        options = replace(options, intrinsics_prior=load_intrinsics_prior(prior, camera_model))
+    observations, solve_camera = to_top_to_bottom(observations, camera_model, readout)
+    if options.baseline == "linear":
+        result = calibrate_line_delay_linear(observations, solve_camera, options)
+    else:
+        result = _solve_with_self_check(observations, solve_camera, options, on_round)
+        if options.refine_intrinsics:
+            camera_model = result.camera  # the camera files carry the refined intrinsics
+    result.warnings[:0] = notes
+    inputs = {"video": None if video_path is None else str(video_path),
+              "target": None if target is None or isinstance(target, Target) else str(target),
+              "camera": None if camera_path is None else str(camera_path)}
+    try:
+        guidance = capture_guidance(result, detection, video_bits_per_pixel(video_path) if video_path else None)
+    except Exception as error:  # noqa: BLE001 - advice must never cost the result
+        guidance = {"advice": [], "error": f"{type(error).__name__}: {error}"}
+    return LineDelayRun(result, judge_line_delay(result), camera_model, detection, options, readout, inputs, guidance)
+
+
+def _solve_with_self_check(observations: Observations, camera: CameraModel, options: LineDelayOptions,
+                           on_round: RoundCallback) -> LineDelayResult:
+    """The spline over the whole video, started from its two halves solved apart (the self-check)."""
+    # One PnP pass seeds both halves and the whole video (each frame's pose is its own: the halves'
+    # are the same). The self-check's halves are solved first, side by side in two threads (the
+    # solver releases the GIL), each from its own PnP start: independent estimates. The whole video
+    # then starts from their trajectories, knots and d, and adapts on from there (a round or two
+    # instead of five: docs/formulation.md §9). Bad input is left to calibrate_line_delay, whose
+    # checks say what is wrong.
+    poses = None
+    if options.self_check and observations.num_frames >= 4 and _fits_in_memory(observations.num_observations):
+        poses = per_frame_pnp(observations, camera)
+    solved_halves = {}
+
+    def solve_half(half):
+        shared = None if poses is None else poses.of_frames(observations.frame_times_s, half.frame_times_s)
+        solved = calibrate_line_delay(half, camera, options, frame_poses=shared)
+        solved_halves[float(half.frame_times_s[0])] = solved
+        return solved
+
+    check = selfcheck.halves(observations, solve_half) if options.self_check else None
+    start = _start_from_halves([solved_halves[t] for t in sorted(solved_halves)], options)
+    result = calibrate_line_delay(observations, camera, options, progress=on_round, frame_poses=poses, **start)
+    if check is not None:
+        result.self_check = check
+        result.line_delay_std_s = selfcheck.widened_std(result.line_delay_std_s, check)
+        if check.get("widen", 1.0) > 1.0:
+            result.warnings.append(f"the halves of the video differ by {check['z']:.1f} of their sigma: "
+                                   f"sigma_d widened x{check['widen']:.2f} (self-check rule)")
+            nominal = 1.0 / (frame_rate_hz(result.used_observations) * result.rows)
+            if result.determined and not result.line_delay_std_s < UNDETERMINED_STD_FRACTION * nominal:
+                result.determined = False
+                result.warnings.append("with the widened error bar the line delay is not determined "
+                                       f"(sigma_d >= {UNDETERMINED_STD_FRACTION * 100:g} % of a frame's readout)")
+    return result
+
+
+def detect(video: PathLike, target: Union[Target, PathLike], camera: CameraModel,
+           options: Union[None, LineDelayOptions, LocalizeOptions] = None, *,
            progress: ProgressArg = False) -> DetectionResult:
     """The target (a Target or its file) detected in every frame of the video (or image folder),
-    with detect_video's cache; InputError when it is detected nowhere or the video's size is not
-    the camera's."""
+    with detect_video's cache (options.detection); InputError when it is detected
+    nowhere or the video's size is not the camera's."""
+    options = options or LineDelayOptions()
     if not isinstance(target, Target):
         target = load_target(target)
-    detection = detect_video(video, target, workers=workers, cache=cache, cache_dir=cache_dir, progress=progress)
+    detection = detect_video(video, target, options.detection, progress=progress)
     check_target_matches(video, target, detection)
     if detection.observations.num_observations == 0:
         raise InputError(f"the target was not detected in any of the {detection.frames_total} frames "
@@ -127,127 +276,11 @@ def detect(video: PathLike, target: Union[Target, PathLike], camera: CameraModel
     return detection
 
 
-def calibrate_video(video: PathLike, target: PathLike, camera: PathLike, *, model: str = "spline",
-                    rows: Optional[int] = None, pixel_sigma: Optional[float] = None, robust_loss: str = "none",
-                    max_rounds: int = 8, uniform_knots: Optional[int] = None, standardise_errors: bool = True,
-                    use_motion_prior: bool = True, workers: Optional[int] = None, cache: bool = True,
-                    cache_dir: Optional[PathLike] = None, progress: ProgressArg = False,
-                    on_detection: DetectionCallback = None, on_round: RoundCallback = None,
-                    start_s: Optional[float] = None, end_s: Optional[float] = None, readout: str = "auto",
-                    self_check: bool = True, min_segment_s: Optional[float] = None,
-                    noise_model: str = "frame", refine_intrinsics: bool = False,
-                    intrinsics_prior: Union[None, PathLike, IntrinsicsPrior] = None) -> VideoResult:
-    """The line delay of a video of a target (`rscalib linedelay`).
-
-    video: file or image folder; target, camera: their files (target YAML; OpenCV or Kalibr camera).
-    model: "spline" (calibrate_line_delay: the adaptive B-spline, Oth et al. 2013) or "linear"
-    (calibrate_line_delay_linear: per-frame poses, Hedborg et al. 2012). uniform_knots,
-    standardise_errors=False and use_motion_prior=False apply to the spline only. rows, pixel_sigma,
-    robust_loss, max_rounds: as the engines'. workers, cache, cache_dir: detection (detect_video).
-    start_s, end_s: use the frames in this time window only. readout: the sensor's readout direction
-    (linedelay.readout.READOUTS) or "auto" (top-down, unless the video's rotation metadata says the
-    picture was turned). self_check: also solve the two halves (linedelay.selfcheck; spline only) and
-    widen sigma_d by its rule. min_segment_s, noise_model: calibrate_line_delay's. refine_intrinsics
-    (spline, top-down readout): refine the camera jointly (calibrate_line_delay's), with the prior
-    `intrinsics_prior` (an IntrinsicsPrior, or an `rscalib intrinsics` result.json whose `std` it uses;
-    default: the documented default prior); the run's camera is then the refined one."""
-    if model not in TRAJECTORY_MODELS:
-        raise InputError(f"unknown trajectory model {model!r}; one of {', '.join(TRAJECTORY_MODELS)}")
-    check_files(video, target, camera)
-    if readout != "auto" and readout not in READOUTS:
-        raise InputError(f"unknown readout direction {readout!r} (auto, {', '.join(READOUTS)})")
-    if min_segment_s is not None and not min_segment_s > 0:
-        raise InputError("the shortest knot segment must be positive")
-    if model == "linear":
-        spline_only = [name for name, used in (("uniform knots", uniform_knots is not None),
-                                               ("unstandardised errors", not standardise_errors),
-                                               ("no motion prior", not use_motion_prior)) if used]
-        if spline_only:
-            raise InputError(f"{', '.join(spline_only)}: only for the spline trajectory (the linear model has no "
-                             "knots, no motion prior and unstandardised errors)")
-    if refine_intrinsics and model != "spline":
-        raise InputError("--refine-intrinsics: only with the spline trajectory")
-    if intrinsics_prior is not None and not refine_intrinsics:
-        raise InputError("an intrinsics prior is only used with --refine-intrinsics")
-    camera_model = load_camera(camera).camera
-    if refine_intrinsics and intrinsics_prior is not None and not isinstance(intrinsics_prior, IntrinsicsPrior):
-        intrinsics_prior = load_intrinsics_prior(intrinsics_prior, camera_model)
-    detection = _detections(video, target, camera_model, workers, cache, cache_dir, progress, on_detection)
-    notes = list(detection.warnings)
-    observations = time_window(detection.observations, start_s, end_s)
-    if readout == "auto":
-        hint = rotation_hint(video)
-        readout = hint or "top-down"
-        if hint:
-            notes.append(f"the video's rotation metadata turns the picture, so the sensor rows are not the image "
-                         f"rows: readout {hint} assumed (override with --readout)")
-    if refine_intrinsics and readout != "top-down":
-        raise InputError(f"--refine-intrinsics: only with a top-down readout for now (here {readout})")
-    observations, solve_camera = to_top_down(observations, camera_model, readout)
-    if model == "linear":
-        result = calibrate_line_delay_linear(observations, solve_camera, rows, pixel_sigma=pixel_sigma,
-                                             robust_loss=robust_loss)
-        settings = {}
-    else:
-        knots = {} if uniform_knots is None else {"num_segments": uniform_knots, "adaptive_knots": False}
-        options = dict(pixel_sigma=pixel_sigma, robust_loss=robust_loss, max_rounds=max_rounds,
-                       standardise_errors=standardise_errors, use_motion_prior=use_motion_prior,
-                       min_segment_s=min_segment_s, noise_model=noise_model, **knots)
-        if refine_intrinsics:  # absent otherwise: the default path's calls are unchanged
-            options |= {"refine_intrinsics": True, "intrinsics_prior": intrinsics_prior}
-        # One PnP pass seeds both halves and the whole video (each frame's pose is its own: the halves'
-        # are the same). The self-check's halves are solved first, side by side in two threads (the
-        # solver releases the GIL), each from its own PnP start: independent estimates. The whole video
-        # then starts from their trajectories, knots and d, and adapts on from there (a round or two
-        # instead of five: docs/formulation.md §9). Bad input is left to calibrate_line_delay, whose
-        # checks say what is wrong.
-        poses = None
-        if self_check and observations.num_frames >= 4 and _fits_in_memory(observations.num_observations):
-            poses = per_frame_pnp(observations, solve_camera)
-        solved_halves = {}
-
-        def solve_half(half):
-            shared = None if poses is None else poses.of_frames(observations.frame_times_s, half.frame_times_s)
-            solved = calibrate_line_delay(half, solve_camera, rows, **options, frame_poses=shared)
-            solved_halves[float(half.frame_times_s[0])] = solved
-            return solved
-
-        check = selfcheck.halves(observations, solve_half) if self_check else None
-        start = _start_from_halves([solved_halves[t] for t in sorted(solved_halves)], options)
-        result = calibrate_line_delay(observations, solve_camera, rows, progress=on_round, frame_poses=poses,
-                                      **(options | start))
-        if self_check:
-            result.self_check = check
-            result.line_delay_std_s = selfcheck.widened_std(result.line_delay_std_s, check)
-            if check.get("widen", 1.0) > 1.0:
-                result.warnings.append(f"the halves of the video differ by {check['z']:.1f} of their sigma: "
-                                       f"sigma_d widened x{check['widen']:.2f} (self-check rule)")
-                nominal = 1.0 / (frame_rate_hz(result.used_observations) * result.rows)
-                if result.determined and not result.line_delay_std_s < UNDETERMINED_STD_FRACTION * nominal:
-                    result.determined = False
-                    result.warnings.append("with the widened error bar the line delay is not determined "
-                                           f"(sigma_d >= {UNDETERMINED_STD_FRACTION * 100:g} % of a frame's readout)")
-        settings = {"trajectory_model": "spline", "standardise_errors": standardise_errors,
-                    "motion_prior": use_motion_prior, "adaptive_knots": uniform_knots is None,
-                    "noise_model": noise_model}
-        if refine_intrinsics:
-            settings["refine_intrinsics"] = True
-            camera_model = result.camera  # the camera files carry the refined intrinsics
-    settings |= {"readout": readout, "start_s": start_s, "end_s": end_s}
-    result.warnings[:0] = notes
-    run = VideoResult(model, result, camera_model, detection, _inputs(video, target, camera), settings)
-    try:
-        run.guidance = capture_guidance(result, detection, video_bits_per_pixel(video))
-    except Exception as error:  # noqa: BLE001 - advice must never cost the result
-        run.guidance = {"advice": [], "error": f"{type(error).__name__}: {error}"}
-    return run
-
-
-def _start_from_halves(halves: list, options: dict) -> dict:
+def _start_from_halves(halves: list, options: LineDelayOptions) -> dict:
     """calibrate_line_delay's start for the whole video from its two solved halves: their joined
     trajectory and the inverse-variance mean of their d; {} (the PnP start) without both halves or
     with fixed knots."""
-    if len(halves) != 2 or "num_segments" in options:
+    if len(halves) != 2 or options.uniform_knots is not None:
         return {}
     weights = [1.0 / h.line_delay_std_s ** 2 if h.determined and 0 < h.line_delay_std_s < math.inf else 0.0
                for h in halves]
@@ -265,38 +298,38 @@ def _fits_in_memory(num_observations: int) -> bool:
     return True
 
 
-def localize_video(video: PathLike, target: PathLike, camera: PathLike, *, model: str = "rs-spline",
-                   line_delay_s: Optional[float] = None, rows: Optional[int] = None,
-                   pixel_sigma: Optional[float] = None, robust_loss: str = "none", workers: Optional[int] = None,
-                   cache: bool = True, cache_dir: Optional[PathLike] = None, progress: ProgressArg = False,
-                   on_detection: DetectionCallback = None, on_round: RoundCallback = None) -> VideoResult:
+def localize_video(video: VideoInput, target: Union[None, PathLike, Target] = None,
+                   camera: Optional[CameraInput] = None, line_delay_s: Optional[float] = None,
+                   options: Optional[LocalizeOptions] = None, *, progress: ProgressArg = False,
+                   on_detection: DetectionCallback = None, on_round: RoundCallback = None) -> LocalizeRun:
     """The camera trajectory of a video of a target with a known line delay (`rscalib localize`).
 
-    line_delay_s: s/row (default: the camera file's). model: "rs-spline" (spline.localize, the
+    line_delay_s: s/row (default: the camera file's). options.model: "rs-spline" (spline.localize, the
     continuous-time rolling-shutter trajectory, paper §5.1, compared with per-frame GS PnP) or
     "gs-pnp" (pnp.pnp_trajectory: per-frame global-shutter poses at mid-readout; the line delay
     may be unknown). Other arguments as calibrate_video's."""
-    if model not in LOCALIZE_MODELS:
-        raise InputError(f"unknown localization model {model!r}; one of {', '.join(LOCALIZE_MODELS)}")
-    check_files(video, target, camera)
-    camera_file = load_camera(camera)
-    camera_model = camera_file.camera
-    if line_delay_s is None:
-        line_delay_s = camera_file.line_delay_s
+    options = options or LocalizeOptions()
+    camera_model, camera_path = _camera(camera)
+    if line_delay_s is None and camera_path is not None:
+        line_delay_s = load_camera(camera_path).line_delay_s
     if line_delay_s is not None and not math.isfinite(line_delay_s):
         raise InputError("the line delay must be a finite number")
-    if model == "rs-spline" and line_delay_s is None:
+    if options.model == "rs-spline" and line_delay_s is None:
         raise InputError("no line delay: pass one (--line-delay, s/row) or a camera file that has one")
-    detection = _detections(video, target, camera_model, workers, cache, cache_dir, progress, on_detection)
-    inputs = _inputs(video, target, camera)
-    if model == "gs-pnp":
-        poses = pnp_trajectory(detection.observations, camera_model, rows, line_delay_s)
+    detection, video_path = _detections(video, target, camera_model, options, progress, on_detection)
+    inputs = {"video": None if video_path is None else str(video_path),
+              "target": None if target is None or isinstance(target, Target) else str(target),
+              "camera": None if camera_path is None else str(camera_path)}
+    verdict = Verdict(TRUSTED, "Trajectory estimated with the given line delay.", (), quantity="line_delay_s",
+                      value=line_delay_s, unit="s/row")
+    if options.model == "gs-pnp":
+        poses = pnp_trajectory(detection.observations, camera_model, options.rows, line_delay_s)
         poses.warnings[:0] = list(detection.warnings)
-        return VideoResult(model, poses, camera_model, detection, inputs)
-    result = localize(detection.observations, camera_model, rows, line_delay_s=line_delay_s,
-                      pixel_sigma=pixel_sigma, robust_loss=robust_loss, progress=on_round)
+        return LocalizeRun(poses, replace(verdict, headline="Per-frame global-shutter poses (PnP)."), camera_model,
+                           detection, options, inputs)
+    result = localize(detection.observations, camera_model, line_delay_s, options, progress=on_round)
     result.warnings[:0] = list(detection.warnings)
-    return VideoResult(model, result, camera_model, detection, inputs,
+    return LocalizeRun(result, verdict, camera_model, detection, options, inputs,
                        comparison=compare_with_pnp(result, camera_model))
 
 
@@ -327,15 +360,40 @@ def check_target_matches(video: PathLike, target: Target, detection: DetectionRe
         raise InputError(probe.mismatch_message(target, seen))
 
 
-def _detections(video, target, camera: CameraModel, workers, cache, cache_dir, progress,
-                on_detection: DetectionCallback) -> DetectionResult:
-    require_frame_times(open_source(video).timestamps_source, video)  # before the slow detection
-    detection = detect(video, target, camera, workers=workers, cache=cache, cache_dir=cache_dir, progress=progress)
-    require_frame_times(detection.timestamps, video)  # a video without times or frame rate
+def _camera(camera: Optional[CameraInput]) -> tuple[CameraModel, Optional[Path]]:
+    """The camera model and its file (None when given as a model)."""
+    if camera is None:
+        raise InputError("a camera is needed: its file (--camera) or a CameraModel")
+    if isinstance(camera, CameraModel):
+        return camera, None
+    if isinstance(camera, CameraFile):
+        return camera.camera, None
+    if not Path(camera).is_file():
+        raise InputError(f"camera file not found: {camera}")
+    return load_camera(camera).camera, Path(camera)
+
+
+def _detections(video: VideoInput, target, camera: CameraModel, options, progress,
+                on_detection: DetectionCallback) -> tuple[DetectionResult, Optional[Path]]:
+    """The detections of `video` (detected now, or given) and the video's path (None when given)."""
+    if isinstance(video, Observations):
+        video = DetectionResult.from_observations(video)
+    if isinstance(video, DetectionResult):
+        detection, path = video, None
+        if tuple(detection.image_size) != (camera.width, camera.height):
+            raise InputError(f"the detections are {detection.image_size[0]}x{detection.image_size[1]} but the camera "
+                             f"is {camera.width}x{camera.height}")
+    else:
+        path = Path(video)
+        if not path.exists():
+            raise InputError(f"video not found: {video}")
+        if target is None:
+            raise InputError("a target is needed to detect: its file (--target) or a Target")
+        if not isinstance(target, Target) and not Path(target).is_file():
+            raise InputError(f"target file not found: {target}")
+        require_frame_times(open_source(video).timestamps_source, video)  # before the slow detection
+        detection = detect(video, target, camera, options, progress=progress)
+        require_frame_times(detection.timestamps, video)  # a video without times or frame rate
     if on_detection is not None:
         on_detection(detection)
-    return detection
-
-
-def _inputs(video, target, camera) -> dict:
-    return {"video": str(video), "target": str(target), "camera": str(camera)}
+    return detection, path

@@ -7,10 +7,10 @@ by a camera whose frame is reflected the same way (the reflection cancels in R' 
 rotation), so d comes out per sensor row. Lens parameters follow the reflection (radial terms
 stay, the tangential p1/p2 change sign or swap).
 
-    top-down     (u, v)            rows = height
-    bottom-up    (u, H - 1 - v)    rows = height
-    left-right   (v, u)            rows = width (a portrait phone video: sensor rows are image columns)
-    right-left   (v, W - 1 - u)    rows = width
+    top-to-bottom   (u, v)            rows = height
+    bottom-to-top   (u, H - 1 - v)    rows = height
+    left-to-right   (v, u)            rows = width (a portrait phone video: sensor rows are image columns)
+    right-to-left   (v, W - 1 - u)    rows = width
 """
 from __future__ import annotations
 
@@ -21,8 +21,7 @@ import numpy as np
 from .._core import CameraModel
 from ..errors import InputError
 from ..observations import Observations
-
-READOUTS = ("top-down", "bottom-up", "left-right", "right-left")
+from ..readout import BOTTOM_TO_TOP, LEFT_TO_RIGHT, READOUT_DIRECTIONS, RIGHT_TO_LEFT, TOP_TO_BOTTOM, readout_direction
 
 
 def _mirror(obs: Observations, camera: CameraModel, axis: int) -> tuple[Observations, CameraModel]:
@@ -58,18 +57,17 @@ def _with(obs: Observations, uv, points, size) -> Observations:
                         uv=uv, target_points=points, image_size=size)
 
 
-def to_top_down(observations: Observations, camera: CameraModel, readout: str
+def to_top_to_bottom(observations: Observations, camera: CameraModel, readout: str
                 ) -> tuple[Observations, CameraModel]:
-    """The observations and camera of the equivalent top-down problem (module docstring)."""
-    if readout not in READOUTS:
-        raise InputError(f"unknown readout direction {readout!r} ({', '.join(READOUTS)})")
-    if readout == "top-down":
+    """The observations and camera of the equivalent top-to-bottom problem (module docstring)."""
+    readout = readout_direction(readout, READOUT_DIRECTIONS)
+    if readout == TOP_TO_BOTTOM:
         return observations, camera
     if camera.model not in ("pinhole-radtan", "pinhole-equidistant"):
         raise InputError(f"--readout {readout} needs a pinhole-radtan or pinhole-equidistant camera")
-    if readout == "bottom-up":
+    if readout == BOTTOM_TO_TOP:
         return _mirror(observations, camera, axis=1)
-    if readout == "left-right":
+    if readout == LEFT_TO_RIGHT:
         return _transpose(observations, camera)
     return _transpose(*_mirror(observations, camera, axis=0))
 
@@ -103,4 +101,4 @@ def rotation_hint(video) -> Optional[str]:
         capture.release()
     except Exception:  # noqa: BLE001 - no metadata is no hint
         return None
-    return {90: "right-left", 180: "bottom-up", 270: "left-right"}.get(angle)
+    return {90: RIGHT_TO_LEFT, 180: BOTTOM_TO_TOP, 270: LEFT_TO_RIGHT}.get(angle)

@@ -22,7 +22,6 @@ import base64
 import html
 import json
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Optional, Union
 
@@ -37,32 +36,20 @@ from ..io.output_folder import output_set  # noqa: E402
 from ..io.results import write_result_json  # noqa: E402
 from ..io.trajectory_files import CSV_COLUMNS, write_tum_trajectory  # noqa: E402
 from ..io.trajectory_files import write_trajectory_csv as _write_csv  # noqa: E402
+from ..readout import GYROFLOW_WORDS, TOP_TO_BOTTOM  # noqa: E402
+from ..verdict import NOT_DETERMINED, Verdict  # noqa: E402
+from .judge import judge_line_delay  # noqa: E402
 from .linear import LinearInterpResult  # noqa: E402
 from .pnp import PnpTrajectory  # noqa: E402
 from .spline import LineDelayResult  # noqa: E402
 
 if TYPE_CHECKING:
     from ..detection.result import DetectionResult
-    from .pipeline import VideoResult
+    from .pipeline import LineDelayRun, LocalizeRun
 
 # the results write_outputs takes: the line delay estimated with either trajectory model
 Estimate = Union[LineDelayResult, LinearInterpResult]
 TRAJECTORY_HEADER = ",".join(CSV_COLUMNS)   # says world_to_camera: T_cw, x_c = R(phi) x_w + p
-# readout (linedelay.readout, after to_top_down) -> Gyroflow's frame_readout_direction
-GYROFLOW_READOUT = {"top-down": "TopToBottom", "bottom-up": "BottomToTop", "left-right": "LeftToRight",
-                    "right-left": "RightToLeft"}
-
-
-# The verdicts of a line-delay estimate and their exit codes (`rscalib linedelay --help`, README).
-TRUSTED, NOT_TRUSTED, UNDETERMINED = "trusted", "not trusted", "undetermined"
-
-
-@dataclass
-class Verdict:
-    trust: bool
-    reasons: list[str]     # why not (or caveats)
-    headline: str
-    status: str = TRUSTED  # TRUSTED | NOT_TRUSTED | UNDETERMINED
 
 
 def _pyplot():
@@ -74,58 +61,6 @@ def _pyplot():
     import matplotlib.pyplot as plt
 
     return plt
-
-
-def _us(x: float) -> str:
-    return f"{x * 1e6:.3f}" if math.isfinite(x) else "?"
-
-
-def verdict(result: Estimate) -> Verdict:
-    """trusted (every check passed), not trusted (estimated, but a check failed: the reasons say
-    which) or undetermined (the data do not determine d: no number is given)."""
-    reasons = []
-    if not result.determined:
-        why = ("the covariance of d is rank deficient" if not math.isfinite(result.line_delay_std_s)
-               else f"sigma_d = {_us(result.line_delay_std_s)} us/row is too large")
-        return Verdict(False, [f"the data do not determine the line delay ({why}): too little motion, or the wrong "
-                               "kind (move the camera faster, mostly rotating about its vertical axis)"],
-                       "Line delay not determined by this video.", UNDETERMINED)
-    if not 0.7 <= result.normalised_cost <= 1.5:
-        reasons.append(f"J/2N = {result.normalised_cost:.2f} is far from 1: the noise model does not fit "
-                       "(wrong intrinsics first of all, then outliers or motion the trajectory cannot follow)")
-    if result.frames_used < 0.3 * result.frames_total:
-        reasons.append(f"only {result.frames_used} of {result.frames_total} frames were usable")
-    rows_seen = result.used_observations.uv[:, 1]
-    span = (np.percentile(rows_seen, 98) - np.percentile(rows_seen, 2)) / result.rows if len(rows_seen) else 0
-    if span < 0.4:
-        reasons.append(f"the target covered only {span * 100:.0f} % of the image rows; move it over the whole frame")
-    check = getattr(result, "self_check", None)
-    if check is not None:
-        if check.get("agree") is False:
-            h = check["halves"]
-            reasons.append(f"the two halves of the video disagree: {_us(h[0]['line_delay_s'])} ± "
-                           f"{_us(h[0]['line_delay_std_s'])} vs {_us(h[1]['line_delay_s'])} ± "
-                           f"{_us(h[1]['line_delay_std_s'])} us/row ({check['z']:.1f} sigma); the error bar is "
-                           f"widened x{check['widen']:.1f}")
-        elif check.get("agree") is None:
-            reasons.append("self-check inconclusive: " + check.get("reason", "a half could not be solved"))
-    if math.isfinite(result.line_delay_std_s) and result.line_delay_s != 0 and \
-            result.line_delay_std_s > 0.02 * abs(result.line_delay_s):
-        reasons.append(f"the uncertainty is {result.line_delay_std_s / abs(result.line_delay_s) * 100:.1f} % of "
-                       "the estimate; record longer or with faster motion")
-    if not result.converged:
-        reasons.append("the solver did not report convergence")
-    structured = (check is not None and check.get("agree") is False) or not 0.7 <= result.normalised_cost <= 1.5
-    if structured and getattr(result, "intrinsics", None) is None and hasattr(result, "intrinsics"):
-        # a camera that is slightly off is what most often makes the halves disagree (docs/experiments.md,
-        # "Joint refinement of the intrinsics"): say the next step in the CLI's words
-        reasons.append("the first suspect is the camera file: run again with --refine-intrinsics (the camera "
-                       "file becomes a prior and is refined with the line delay)")
-    trust = not reasons
-    headline = (f"Line delay {_us(result.line_delay_s)} ± {_us(result.line_delay_std_s)} µs/row "
-                f"(readout {result.readout_time_s * 1e3:.3f} ms): "
-                + ("trust it." if trust else "estimated, but do not trust it yet."))
-    return Verdict(trust, reasons, headline, TRUSTED if trust else NOT_TRUSTED)
 
 
 # ------------------------------------------------------------------------------- trajectories
@@ -344,13 +279,14 @@ def plot_trajectory(result: Estimate, path: Path) -> Path:
     return _save(fig, path)
 
 
-def _plot_jobs(result: Estimate) -> list:
+def _plot_jobs(result: Estimate, verdict: Verdict) -> list:
     """The report's plots of a line-delay estimate, (caption, plot function, file name): residuals and
     trajectory for both models; the spline's error ellipses, knot density and rounds besides (the linear
-    model has no knots, no rounds and, by default, unstandardised errors)."""
+    model has no knots, no rounds and, by default, unstandardised errors). A line delay that is not
+    determined is not drawn (the ellipses and the rounds show it)."""
     jobs = [("residuals over time", plot_residuals_time, "residuals_time.png"),
             ("residuals over the image and target coverage", plot_residuals_image, "residuals_image.png")]
-    if isinstance(result, LineDelayResult):
+    if isinstance(result, LineDelayResult) and verdict.claims:
         jobs += [("how image motion stretches the detection noise (paper Fig. 2)", plot_covariance_ellipses,
                   "covariance_ellipses.png"),
                  ("knot density and image motion", plot_knots_and_speed, "knots_speed.png"),
@@ -359,11 +295,11 @@ def _plot_jobs(result: Estimate) -> list:
     return jobs
 
 
-def _plots(result: Estimate, out: Path, failed: list) -> dict:
+def _plots(result: Estimate, verdict: Verdict, out: Path, failed: list) -> dict:
     """The plots of _plot_jobs drawn into out, {caption: path}; the ones that fail are left out
     and said in `failed`."""
     plt = _pyplot()
-    jobs = _plot_jobs(result)
+    jobs = _plot_jobs(result, verdict)
     plots = {}
     for caption, plot, name in jobs:
         # a plot of degenerate data (NaN, infinite sigma) must not cost the user the result
@@ -389,35 +325,77 @@ def _start(result, out_dir, frames_total: Optional[int], extra: Optional[dict], 
     return out, summary
 
 
-def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_total: Optional[int] = None,
-                  extra: Optional[dict] = None, fps: float = 0.0, title: Optional[str] = None,
-                  command: str = "linedelay", inputs: Optional[dict] = None,
-                  detections: Optional[DetectionResult] = None, readout: str = "top-down",
+# the fields of an estimate that claim a line delay: null when the verdict claims none
+_CLAIMED = ("line_delay_s", "line_delay_std_s", "readout_time_s", "image_readout_time_s")
+
+
+def estimate_summary(result: Estimate, verdict: Verdict, frames_total: Optional[int] = None,
+                     extra: Optional[dict] = None) -> dict:
+    """The result.json fields of a line-delay estimate with its verdict (without the files): the
+    estimate's summary, the frames read, `extra`, image_readout_time_s and the verdict block. When
+    the verdict claims no number (not determined), the line delay, its sigma and the readout times
+    are null and the unclaimed estimate is kept apart under `not_claimed` (for diagnosis only)."""
+    summary = result.summary_dict()
+    if frames_total is not None:
+        summary["frames_total"] = int(frames_total)
+    summary.update(extra or {})
+    summary["image_readout_time_s"] = image_readout_time_s(result)
+    summary["verdict"] = verdict.to_dict()
+    if not verdict.claims:
+        summary["not_claimed"] = {k: summary[k] for k in _CLAIMED}
+        summary.update({k: None for k in _CLAIMED})
+    return summary
+
+
+def _run_extra(run: LineDelayRun) -> dict:
+    """The result.json fields of the video and its detection, then the run's settings and guidance."""
+    d = run.detection
+    return {"video": run.inputs.get("video"), "detection_dropped": d.dropped, "frames_detected": d.frames_detected,
+            "timestamps_from": d.timestamps, "detection_time_s": d.detect_time_s} | run.settings \
+        | ({"guidance": run.guidance} if run.guidance else {})
+
+
+def run_summary(run: LineDelayRun) -> dict:
+    """LineDelayRun.summary(): what result.json holds, without the files and the provenance."""
+    return estimate_summary(run.result, run.verdict, run.detection.frames_total, _run_extra(run))
+
+
+def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, verdict: Optional[Verdict] = None,
+                  frames_total: Optional[int] = None, extra: Optional[dict] = None, fps: float = 0.0,
+                  title: Optional[str] = None, command: str = "linedelay", inputs: Optional[dict] = None,
+                  detections: Optional[DetectionResult] = None, readout: str = TOP_TO_BOTTOM,
                   gyroflow: Optional[dict] = None, report: bool = True,
                   on_result: Optional[Callable[[dict], None]] = None) -> dict:
     """Everything of a line-delay estimate (spline or linear model) into out_dir: result.json,
-    trajectory.csv and trajectory_tum.txt, the camera files of every format, the detections as
-    corners.vnl (when given), the plots and report.html. Returns the result.json dict (without its
-    provenance). frames_total: frames read (default: the result's); extra: more result.json fields;
-    fps: for the Gyroflow profile; readout: the readout direction (linedelay.readout); gyroflow:
-    camera_brand, camera_model, lens_model for its profile; command, inputs: the provenance.
-    report: False leaves out the plots and report.html (batch use). on_result(summary) is called once
-    result.json is written (in the staging folder) and before the plots are drawn (the CLI prints the
-    result there); the folder's files appear together when the plots are done."""
+    trajectory.csv and trajectory_tum.txt, the camera files of every format (only when the verdict
+    claims a line delay: a file for another tool never carries an undetermined one), the detections
+    as corners.vnl (when given), the plots and report.html. Returns the result.json dict (without
+    its provenance). verdict: the estimate's (default: judge.judge_line_delay); frames_total: frames
+    read (default: the result's); extra: more result.json fields; fps: for the Gyroflow profile;
+    readout: the readout direction (rscalib.readout); gyroflow: camera_brand, camera_model,
+    lens_model for its profile; command, inputs: the provenance. report: False leaves out the plots
+    and report.html (batch use). on_result(summary) is called once result.json is written (in the
+    staging folder) and before the plots are drawn (the CLI prints the result there); the folder's
+    files appear together when the plots are done."""
+    verdict = verdict or judge_line_delay(result)
     with output_set(out_dir) as staged:
-        out, summary = _start(result, staged, frames_total, extra)
-        summary["image_readout_time_s"] = image_readout_time_s(result)
-        v = verdict(result)
-        summary["verdict"] = {"trust": v.trust, "status": v.status, "headline": v.headline, "reasons": v.reasons}
+        out = Path(staged)
+        summary = estimate_summary(result, verdict, frames_total, extra)
         warnings = list(summary["warnings"])
 
         files = write_trajectories(result, out)
-        exports = write_camera_set(camera, out, result.line_delay_s, fps=fps, rms_px=result.rms_px,
-                                   readout_direction=GYROFLOW_READOUT.get(readout), gyroflow=gyroflow)
-        files |= exports.files
-        notes = list(exports.notes)
-        if exports.details:
-            summary["exports"] = exports.details
+        notes = []
+        if verdict.claims:
+            exports = write_camera_set(camera, out, result.line_delay_s, fps=fps, rms_px=result.rms_px,
+                                       readout_direction=GYROFLOW_WORDS.get(readout), gyroflow=gyroflow)
+            files |= exports.files
+            notes += exports.notes
+            if exports.details:
+                summary["exports"] = exports.details
+        else:
+            notes.append("no camera files with the line delay (OpenCV, Kalibr, Gyroflow, ROS, mrcal, COLMAP): the "
+                         "line delay is not determined by this video, and a file for another tool carries only "
+                         "a value the verdict stands behind")
         if detections is not None:
             skipped = write_detections_vnl(detections, out / "corners.vnl")
             if skipped is None:
@@ -425,7 +403,7 @@ def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_tota
             else:
                 notes.append(skipped)
         if report:  # listed now, drawn after the result is out; result.json is rewritten if one fails
-            files["plots"] = [name for _, _, name in _plot_jobs(result)]
+            files["plots"] = [name for _, _, name in _plot_jobs(result, verdict)]
             files["report"] = "report.html"
         summary["warnings"] = warnings
         summary["export_notes"] = notes
@@ -434,60 +412,45 @@ def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, frames_tota
         if on_result is not None:
             on_result(summary)
         if report:
-            plots = _plots(result, out, warnings)
+            plots = _plots(result, verdict, out, warnings)
             if len(plots) < len(files["plots"]):
                 files["plots"] = [p.name for p in plots.values()]
                 result_path = write_result_json(out, summary, command=command, inputs=inputs)
             if title is None:
-                title = "rscalib linedelay" + (" --trajectory linear" if isinstance(result, LinearInterpResult) else "")
-            _write_html(out / "report.html", title, summary, v, plots, _provenance_of(result_path))
+                title = "rscalib linedelay" + (" (the linear baseline)" if isinstance(result, LinearInterpResult) else "")
+            _write_html(out / "report.html", title, summary, verdict, plots, _provenance_of(result_path))
     return summary
 
 
-def write_localize_outputs(result: LineDelayResult, out_dir, *, comparison: Optional[dict] = None,
-                           frames_total: Optional[int] = None, extra: Optional[dict] = None,
-                           command: str = "localize", inputs: Optional[dict] = None) -> dict:
-    """A trajectory with a known line delay (rscalib.localize) into out_dir: result.json (with the
-    comparison against per-frame GS PnP, linedelay.pnp.compare_with_pnp), trajectory.csv,
-    trajectory_tum.txt and trajectory.png. Returns the result.json dict."""
+def write_line_delay_run(run: LineDelayRun, out_dir, *, report: bool = True, gyroflow: Optional[dict] = None,
+                         on_result: Optional[Callable[[dict], None]] = None, command: str = "linedelay") -> dict:
+    """LineDelayRun.write(): write_outputs with everything the run knows."""
+    return write_outputs(run.result, run.camera, out_dir, verdict=run.verdict, frames_total=run.detection.frames_total,
+                         extra=_run_extra(run), fps=run.fps, detections=run.detection, readout=run.readout,
+                         gyroflow=gyroflow, report=report, on_result=on_result, command=command, inputs=run.inputs)
+
+
+def write_localize_run(run: LocalizeRun, out_dir, *, command: str = "localize") -> dict:
+    """LocalizeRun.write(): result.json (with the verdict block and, for rs-spline, the comparison
+    against per-frame GS PnP, linedelay.pnp.compare_with_pnp), trajectory.csv and trajectory_tum.txt,
+    and trajectory.png for rs-spline. Returns the result.json dict."""
+    d = run.detection
+    extra = {"video": run.inputs.get("video"), "detection_dropped": d.dropped, "frames_detected": d.frames_detected,
+             "timestamps_from": d.timestamps, "detection_time_s": d.detect_time_s}
     with output_set(out_dir) as staged:
-        out, summary = _start(result, staged, frames_total, extra, trajectory_model="rs-spline",
-                              gs_pnp_comparison=comparison)
-        summary.pop("line_delay_std_s", None)  # d was given, not estimated
-        summary["image_readout_time_s"] = image_readout_time_s(result)
-        summary["files"] = write_trajectories(result, out) | {"plots": [plot_trajectory(result, out / "trajectory.png").name]}
-        write_result_json(out, summary, command=command, inputs=inputs)
+        if run.model == "gs-pnp":
+            out, summary = _start(run.result, staged, d.frames_total, extra)
+            summary["files"] = write_trajectories(run.result, out)
+        else:
+            out, summary = _start(run.result, staged, d.frames_total, extra, trajectory_model="rs-spline",
+                                  gs_pnp_comparison=run.comparison)
+            summary.pop("line_delay_std_s", None)  # d was given, not estimated
+            summary["image_readout_time_s"] = image_readout_time_s(run.result)
+            summary["files"] = write_trajectories(run.result, out) | {
+                "plots": [plot_trajectory(run.result, out / "trajectory.png").name]}
+        summary["verdict"] = run.verdict.to_dict()
+        write_result_json(out, summary, command=command, inputs=run.inputs)
     return summary
-
-
-def write_pnp_outputs(trajectory: PnpTrajectory, out_dir, *, frames_total: Optional[int] = None,
-                      extra: Optional[dict] = None, command: str = "localize",
-                      inputs: Optional[dict] = None) -> dict:
-    """Per-frame GS PnP poses (linedelay.pnp.pnp_trajectory) into out_dir: result.json, and
-    trajectory.csv and trajectory_tum.txt in the format of the other models. Returns the result.json dict."""
-    with output_set(out_dir) as staged:
-        out, summary = _start(trajectory, staged, frames_total, extra)
-        summary["files"] = write_trajectories(trajectory, out)
-        write_result_json(out, summary, command=command, inputs=inputs)
-    return summary
-
-
-def write_video_outputs(run: VideoResult, out_dir, command: Optional[str] = None,
-                        gyroflow: Optional[dict] = None, report: bool = True,
-                        on_result: Optional[Callable[[dict], None]] = None) -> dict:
-    """The outputs of a linedelay/pipeline.py run, by its model; returns the result.json dict.
-    command: the provenance's command (default: `linedelay` or `localize`, by the model);
-    gyroflow: camera_brand, camera_model, lens_model for the Gyroflow profile; report, on_result:
-    write_outputs' (line-delay models only)."""
-    common = dict(frames_total=run.detection.frames_total, extra=run.summary_extra(), inputs=run.inputs,
-                  command=command or run.command)
-    if run.model == "rs-spline":
-        return write_localize_outputs(run.result, out_dir, comparison=run.comparison, **common)
-    if run.model == "gs-pnp":
-        return write_pnp_outputs(run.result, out_dir, **common)
-    return write_outputs(run.result, run.camera, out_dir, fps=run.fps, detections=run.detection,
-                         readout=run.settings.get("readout", "top-down"), gyroflow=gyroflow, report=report,
-                         on_result=on_result, **common)
 
 
 def _provenance_of(result_path: Path) -> dict:
@@ -506,14 +469,15 @@ def _table_rows(summary: dict) -> list[tuple[str, object]]:
                 f"{summary['knots']} / {summary['segments']} / {summary['chains']}")
     else:
         size = ("knot segments", summary["segments"])
-    if (summary.get("verdict") or {}).get("status") == UNDETERMINED:
+    if (summary.get("verdict") or {}).get("status") == NOT_DETERMINED:
         value, spread = "not determined", "—"
     else:
         value = f"{summary['line_delay_s'] * 1e6:.4f} µs/row"
         spread = "—" if std is None else f"{std * 1e6:.4f} µs/row"
     return [("line delay", value),
             ("standard deviation", spread),
-            ("readout time (sensor)", f"{summary['readout_time_s'] * 1e3:.4f} ms ({summary['rows']} rows read out)"),
+            ("readout time (sensor)", "—" if summary.get("readout_time_s") is None else
+             f"{summary['readout_time_s'] * 1e3:.4f} ms ({summary['rows']} rows read out)"),
             ("image readout time", "—" if summary.get("image_readout_time_s") is None else
              f"{summary['image_readout_time_s'] * 1e3:.4f} ms (first to last image row; Gyroflow's frame_readout_time)"),
             ("frames used / total", f"{summary['frames_used']} / {summary['frames_total']}"),
@@ -618,14 +582,14 @@ def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict,
         check_html = (f"<h2>Self-check: the two halves {state}{html.escape(z)}</h2><ul>{halves}</ul>"
                       f"<p>{html.escape(check.get('rule', ''))}</p>")
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in summary.get("export_notes", []))
-    color = "#1a7f37" if v.trust else "#b35900"
+    color = "#1a7f37" if v.trusted else "#b35900"
     path.write_text(f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}}
 table{{border-collapse:collapse}}th,td{{padding:3px 10px;border-bottom:1px solid #ddd;text-align:left}}
 .verdict{{border-left:6px solid {color};padding:0.5em 1em;background:#f6f6f6}}
 figure{{margin:1.5em 0}}img{{max-width:100%}}figcaption{{color:#555;font-size:90%}}</style></head><body>
 <h1>{html.escape(title)}</h1>
-<div class="verdict"><strong>{html.escape(v.headline)}</strong>{'<ul>' + reasons + '</ul>' if reasons else ''}{'' if v.trust else '<p>How to film a better calibration video: docs/capture.md in the rscalib repository.</p>'}</div>
+<div class="verdict"><strong>{html.escape(v.headline)}</strong>{'<ul>' + reasons + '</ul>' if reasons else ''}{'' if v.trusted else '<p>How to film a better calibration video: docs/capture.md in the rscalib repository.</p>'}</div>
 <h2>Result</h2><table>{table}</table>
 {check_html}
 {intrinsics_html(summary)}

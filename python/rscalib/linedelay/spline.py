@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Optional
+from typing import Callable, Optional, Union
 
 import numpy as np
 
@@ -20,6 +20,7 @@ from ..errors import InputError
 from ..observations import Observations
 from . import noise
 from .common import (
+    SOLVER_THREADS,
     IntrinsicsPrior,
     assess_noise_and_determinacy,
     check_segment_count,
@@ -27,10 +28,12 @@ from .common import (
     choose_pixel_sigma,
     default_intrinsics_prior,
     initial_values,
+    load_intrinsics_prior,
     seed_poses,
     solve_warnings,
     summary_fields,
 )
+from .options import LineDelayOptions, LocalizeOptions
 from .pnp import FramePoses
 
 # diag(Q) of the acceleration prior, [m^2/s^3 x3, rad^2/s^3 x3]: a hand-held camera's
@@ -38,7 +41,9 @@ from .pnp import FramePoses
 # kept as PAPER_MOTION_PRIOR_Q; with errors standardised in pixels they bias d (docs/formulation.md).
 DEFAULT_MOTION_PRIOR_Q = (1.0, 1.0, 1.0, 1e2, 1e2, 1e2)
 PAPER_MOTION_PRIOR_Q = (1e-5, 1e-5, 1e-5, 1e-2, 1e-2, 1e-2)
-NOISE_MODELS = ("frame", "video")
+# A segment splits when J_j >= 2 N_j + SPLIT_MARGIN_SIGMAS sqrt(4 N_j); 0 is the paper's rule, which
+# also splits ~1/3 of well-modelled segments by chance (docs/formulation.md §7).
+SPLIT_MARGIN_SIGMAS = 2.0
 # Rounds before the last are re-solved after knot insertion anyway: solve them loosely.
 _ROUND_MAX_ITERATIONS = 30
 _ROUND_FUNCTION_TOLERANCE = 1e-6
@@ -106,8 +111,6 @@ class LineDelayResult:
     # (start, estimate, sigma, prior, covariance of [d, intrinsics]); None when the camera was known.
     camera: Optional[CameraModel] = field(default=None, repr=False)
     intrinsics: Optional[dict] = None
-    # (M, 2) each used observation's linearised contribution to d (C++ SchurVariance); empty if not computed
-    line_delay_score: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
 
     @property
     def num_segments(self) -> int:
@@ -130,16 +133,15 @@ def _finite_or_none(x: float) -> Optional[float]:
 
 
 def _solver_options(pixel_sigma: float, *, estimate_line_delay: bool, standardise_errors: bool,
-                    use_motion_prior: bool, motion_prior_q, robust_loss: str, num_threads: int,
-                    compute_covariance: bool) -> _core.RsSolverOptions:
+                    use_motion_prior: bool, robust_loss: str, compute_covariance: bool) -> _core.RsSolverOptions:
     options = _core.RsSolverOptions()
     options.pixel_sigma = float(pixel_sigma)
     options.estimate_line_delay = estimate_line_delay
     options.standardise_errors = standardise_errors
     options.use_motion_prior = use_motion_prior
-    options.motion_prior_q = np.asarray(motion_prior_q, dtype=np.float64)
+    options.motion_prior_q = np.asarray(DEFAULT_MOTION_PRIOR_Q, dtype=np.float64)
     options.robust_loss = robust_loss
-    options.num_threads = int(num_threads)
+    options.num_threads = SOLVER_THREADS
     options.compute_covariance = compute_covariance
     return options
 
@@ -217,83 +219,61 @@ def _split_segments(trajectory: BSpline, segment_cost, segment_count, min_segmen
     return new_knots, at_cap
 
 
-def calibrate_line_delay(observations: Observations, camera: CameraModel, rows: Optional[int] = None, *,
-                         pixel_sigma: Optional[float] = None,
+def calibrate_line_delay(observations: Observations, camera: CameraModel,
+                         options: Optional[LineDelayOptions] = None, *,
                          line_delay0_s: Optional[float] = None,
-                         initial_segments_per_s: Optional[float] = None,
-                         num_segments: Optional[int] = None,
-                         adaptive_knots: bool = True,
-                         max_rounds: int = 8,
-                         min_segment_s: Optional[float] = None,
-                         split_margin_sigmas: float = 2.0,
-                         standardise_errors: bool = True,
-                         use_motion_prior: bool = True,
-                         motion_prior_q=DEFAULT_MOTION_PRIOR_Q,
-                         robust_loss: str = "none",
-                         num_threads: int = 2,
-                         noise_model: str = "frame",
-                         refine_intrinsics: bool = False,
-                         intrinsics_prior: Optional[IntrinsicsPrior] = None,
-                         line_delay_score: bool = False,
                          frame_poses: Optional[FramePoses] = None,
                          start_trajectory: Optional[BSpline] = None,
                          progress: Optional[Callable[[RoundRecord], None]] = None) -> LineDelayResult:
-    """Estimate the line delay d (s/row) and the continuous-time trajectory (Oth et al. 2013 §3-4).
+    """Estimate the line delay d (s/row) and the continuous-time trajectory (Oth et al. 2013 §3-4):
+    the solve alone, on detections already made. The job with its self-check, verdict and files is
+    :func:`rscalib.calibrate_video`, which calls this.
 
-    observations: detected target points with frame timestamps; camera: known intrinsics;
-    rows: image rows read out (default: image height). pixel_sigma: detection noise in px
-    (default: estimated from the data, see rscalib.linedelay.noise). num_segments fixes uniform knots
-    (with adaptive_knots=False, for experiments). min_segment_s: shortest segment the
-    adaptation may create (default: half a frame interval, at most 1/60 s); initial_segments_per_s: uniform
-    knots to start from (default fps/4 but at least 7.5, deliberately too few). split_margin_sigmas:
-    a segment splits when J_j >= 2 N_j + margin * sqrt(4 N_j); 0 is the paper's rule, which
-    also splits ~1/3 of well-modelled segments by chance (docs/formulation.md §7).
-    noise_model: "frame" (default: a sigma per frame, a fixed error pattern and frame-to-frame
-    correlation learnt from the residuals, docs/formulation.md §8) or "video" (one sigma for the
-    whole video, the model before issue 12; for experiments).
-    refine_intrinsics: refine the camera's parameters jointly with the trajectory and d, from
-    `camera` as the start, with the prior `intrinsics_prior` (common.IntrinsicsPrior; default:
-    common.default_intrinsics_prior, sigma_f 2 %, sigma_c 10 px); the result's `camera` and
-    `intrinsics` (with the covariance of [d, intrinsics]) hold the outcome (docs/formulation.md §14).
+    observations: detected target points with frame timestamps; camera: known intrinsics (the start
+    with options.refine_intrinsics). options (LineDelayOptions; None: the defaults) read here: rows,
+    pixel_sigma_px, robust_loss, max_rounds, min_segment_s, uniform_knots, standardise_errors,
+    motion_prior, refine_intrinsics and intrinsics_prior (a common.IntrinsicsPrior here; default
+    common.default_intrinsics_prior: sigma_f 2 %, sigma_c 10 px; the result's `camera` and
+    `intrinsics` hold the outcome, docs/formulation.md §14). The noise model is docs/formulation.md §8.
+    line_delay0_s: the start of d (default 1 / (fps rows)).
     frame_poses: pnp.per_frame_pnp(observations, camera) when already computed (the self-check's
     halves take theirs from the whole video's: FramePoses.of_frames).
     start_trajectory: a solved trajectory to start from instead of the PnP smoothing spline (the whole
     video starts from its self-check halves' joined trajectory, with line_delay0_s their mean d): its
     knots inside this data's time span are the first round's, and the adaptation goes on from there
     (docs/formulation.md §9).
-    line_delay_score: also return each observation's linearised contribution to d
-    (`result.line_delay_score`, for experiments on correlated errors: docs/experiments.md).
     progress: called after each round.
     """
-    return _run(observations, camera, rows, estimate=True, pixel_sigma=pixel_sigma,
-                line_delay_s=line_delay0_s, initial_segments_per_s=initial_segments_per_s,
-                num_segments=num_segments, adaptive_knots=adaptive_knots, max_rounds=max_rounds,
-                min_segment_s=min_segment_s, split_margin_sigmas=split_margin_sigmas,
-                standardise_errors=standardise_errors,
-                use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
-                robust_loss=robust_loss, num_threads=num_threads, noise_model=noise_model,
-                refine_intrinsics=refine_intrinsics, intrinsics_prior=intrinsics_prior,
-                line_delay_score=line_delay_score, frame_poses=frame_poses,
-                start_trajectory=start_trajectory, progress=progress)
+    return _run(observations, camera, options or LineDelayOptions(), estimate=True, line_delay_s=line_delay0_s,
+                frame_poses=frame_poses, start_trajectory=start_trajectory, progress=progress)
 
 
-def localize(observations: Observations, camera: CameraModel, rows: Optional[int] = None,
-             line_delay_s: float = 0.0, **kwargs) -> LineDelayResult:
-    """Continuous-time trajectory with a known line delay (paper §5.1); same options as
-    calibrate_line_delay. The result's frame_poses hold the per-frame GS PnP baseline."""
+def localize(observations: Observations, camera: CameraModel, line_delay_s: float,
+             options: Union[None, LineDelayOptions, LocalizeOptions] = None, *,
+             progress: Optional[Callable[[RoundRecord], None]] = None) -> LineDelayResult:
+    """Continuous-time trajectory with a known line delay (paper §5.1); options as
+    calibrate_line_delay's (rows, pixel_sigma_px, robust_loss, max_rounds). The result's frame_poses
+    hold the per-frame GS PnP baseline."""
     if not np.isfinite(line_delay_s):
         raise InputError("line_delay_s must be a finite number")
-    return _run(observations, camera, rows, estimate=False, line_delay_s=float(line_delay_s), **kwargs)
+    given = options or LocalizeOptions()
+    if isinstance(given, LocalizeOptions):   # the solve's options: the method's, with the localization's own
+        given = LineDelayOptions(rows=given.rows, pixel_sigma_px=given.pixel_sigma_px,
+                                 robust_loss=given.robust_loss, max_rounds=given.max_rounds, self_check=False)
+    return _run(observations, camera, given, estimate=False, line_delay_s=float(line_delay_s), progress=progress)
 
 
-def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s=None,
-         initial_segments_per_s=None, num_segments=None, adaptive_knots=True, max_rounds=8,
-         min_segment_s=None, split_margin_sigmas=2.0, standardise_errors=True, use_motion_prior=True,
-         motion_prior_q=DEFAULT_MOTION_PRIOR_Q, robust_loss="none", num_threads=2, noise_model="frame",
-         refine_intrinsics=False, intrinsics_prior=None, line_delay_score=False, frame_poses=None,
-         start_trajectory=None, progress=None) -> LineDelayResult:
-    if noise_model not in NOISE_MODELS:
-        raise InputError(f"unknown noise model {noise_model!r} ({', '.join(NOISE_MODELS)})")
+def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_poses=None, start_trajectory=None,
+         progress=None) -> LineDelayResult:
+    rows, pixel_sigma, robust_loss, max_rounds = options.rows, options.pixel_sigma_px, options.robust_loss, \
+        options.max_rounds
+    min_segment_s, num_segments = options.min_segment_s, options.uniform_knots
+    adaptive_knots = num_segments is None
+    standardise_errors, use_motion_prior = options.standardise_errors, options.motion_prior
+    refine_intrinsics = options.refine_intrinsics
+    intrinsics_prior = options.intrinsics_prior if refine_intrinsics else None
+    if intrinsics_prior is not None and not isinstance(intrinsics_prior, IntrinsicsPrior):
+        intrinsics_prior = load_intrinsics_prior(intrinsics_prior, camera)
     started = time.perf_counter()
     rows, fps, nominal_delay_s, d = initial_values(observations, camera, rows, line_delay_s)
     warnings: list[str] = []
@@ -312,9 +292,8 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     t_begin = float(used.frame_times_s[0])
     t_end = float(used.frame_times_s[-1] + 1.0 / fps)  # the last frame's readout
     duration = t_end - t_begin
-    if initial_segments_per_s is None:
-        # One segment per 4 frames (at least 7.5 per second): too few for hand-held motion on purpose.
-        initial_segments_per_s = max(fps / 4.0, 7.5)
+    # One segment per 4 frames (at least 7.5 per second): too few for hand-held motion on purpose.
+    initial_segments_per_s = max(fps / 4.0, 7.5)
     check_segment_count(num_segments, used.num_frames)
     segments = int(num_segments) if num_segments else max(1, int(math.ceil(duration * initial_segments_per_s)))
     if start_trajectory is not None and adaptive_knots and not num_segments:
@@ -322,15 +301,12 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     else:
         trajectory = initial_trajectory(used, used_poses, d, segments, t_begin, t_end)
 
-    options = _solver_options(sigma, estimate_line_delay=estimate, standardise_errors=standardise_errors,
-                              use_motion_prior=use_motion_prior, motion_prior_q=motion_prior_q,
-                              robust_loss=robust_loss, num_threads=num_threads, compute_covariance=False)
-    options.line_delay_score = bool(line_delay_score)
+    solver = _solver_options(sigma, estimate_line_delay=estimate, standardise_errors=standardise_errors,
+                             use_motion_prior=use_motion_prior, robust_loss=robust_loss, compute_covariance=False)
     # The noise model (docs/formulation.md §8): white noise per frame from the grid, plus what the
     # residuals show after each round (a fixed pattern per corner, frame-to-frame correlation).
-    # Without RsSolverOptions.observation_sigma (an older _core) the white part is one sigma for all.
-    per_frame = noise_model == "frame" and sigma_source == "grid third differences"
-    weights_per_observation = per_frame and hasattr(options, "observation_sigma")
+    per_frame = sigma_source == "grid third differences"
+    weights_per_observation = per_frame
     white = (noise.frame_pixel_sigma(used, sigma)[used.frame_index] if weights_per_observation
              else np.full(used.num_observations, sigma))
     structure = noise.ResidualStructure(0.0, 0.0, 1.0, 0)
@@ -338,15 +314,15 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
 
     def use_sigma(values: np.ndarray) -> None:
         if weights_per_observation:
-            options.observation_sigma = values
+            solver.observation_sigma = values
         else:
-            options.pixel_sigma = float(values[0])
+            solver.pixel_sigma = float(values[0])
 
     if per_frame:
         use_sigma(obs_sigma)
     start_camera = camera
     if refine_intrinsics:
-        prior = _set_intrinsics_prior(options, camera, intrinsics_prior)
+        prior = _set_intrinsics_prior(solver, camera, intrinsics_prior)
     args = (used.frame_times_s[used.frame_index], used.uv, used.points_w(), camera)
     history: list[RoundRecord] = []
     adapted = not adaptive_knots
@@ -358,8 +334,8 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
     for round_index in range(max(1, max_rounds)):
         last_chance = round_index == max_rounds - 1
         # a final round usually ends the adaptation: sigma_d comes with it (wasted if it splits again)
-        _set_tolerance(options, final=final, covariance=final and estimate)
-        summary = _core.solve_line_delay(*args, trajectory, d, options)
+        _set_tolerance(solver, final=final, covariance=final and estimate)
+        summary = _core.solve_line_delay(*args, trajectory, d, solver)
         d = summary.line_delay_s
         if refine_intrinsics:  # the next round starts from the refined camera
             camera = _with_params(camera, summary.intrinsics)
@@ -374,7 +350,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
             segment_cost = _segment_sums(trajectory, np.asarray(summary.observation_time_s), sq,
                                          len(summary.segment_cost))
         new_knots, at_cap = _split_segments(trajectory, segment_cost, summary.segment_count,
-                                            min_segment_s, split_margin_sigmas,
+                                            min_segment_s, SPLIT_MARGIN_SIGMAS,
                                             structure.correlation) if adaptive_knots else ([], 0)
         if per_frame and not (final and not new_knots):  # the next solve weighs the errors by it
             obs_sigma = new_sigma
@@ -399,8 +375,8 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
 
     if not (final and adapted):
         # Final polish at tight tolerance on the final knots, with the covariance of d.
-        _set_tolerance(options, final=True, covariance=estimate)
-        summary = _core.solve_line_delay(*args, trajectory, d, options)
+        _set_tolerance(solver, final=True, covariance=estimate)
+        summary = _core.solve_line_delay(*args, trajectory, d, solver)
         d = summary.line_delay_s
         if refine_intrinsics:
             camera = _with_params(camera, summary.intrinsics)
@@ -456,8 +432,7 @@ def _run(observations, camera, rows, *, estimate, pixel_sigma=None, line_delay_s
         image_velocity_px_s=np.asarray(summary.image_velocity_px_s),
         standardised_sq=np.asarray(summary.standardised_sq), frame_poses=used_poses, used_observations=used,
         observation_sigma_px=obs_sigma, noise=noise_summary, solver_line_delay_std_s=solver_std,
-        camera=camera if refine_intrinsics else None, intrinsics=intrinsics,
-        line_delay_score=np.asarray(summary.line_delay_score) if estimate else np.zeros((0, 2)))
+        camera=camera if refine_intrinsics else None, intrinsics=intrinsics)
 
 
 def _set_intrinsics_prior(options: _core.RsSolverOptions, camera: CameraModel,

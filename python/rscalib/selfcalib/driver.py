@@ -23,6 +23,7 @@ import numpy as np
 
 from .. import _core
 from ..errors import InputError
+from .options import FrontEndOptions
 
 __all__ = ["FrameSearch", "MeasurementSource", "OUT_OF_VIEW_FRAMES", "SelfCalibHistory", "run_bank"]
 
@@ -104,17 +105,22 @@ class SelfCalibHistory:
 
 
 def run_bank(bank: _core.SogBank, frames: Iterable[tuple[float, Any]], source: MeasurementSource, *,
-             min_visible: int = 20, max_new_per_frame: int = 10, max_frames: Optional[int] = None,
+             min_visible: Optional[int] = None, max_new_per_frame: Optional[int] = None,
+             max_frames: Optional[int] = None,
              out_of_view_frames: Optional[int] = None,
              on_frame: Optional[Callable[[int, _core.SogBank, _core.SogUpdateReport], None]] = None
              ) -> SelfCalibHistory:
     """Run ``bank`` over ``frames``, pairs (time in s, frame) with increasing times; a frame of None
     (unreadable) is skipped. While fewer than ``min_visible`` measurements were used in a frame's
     update, ask ``source`` for new features: as many as missing in the first frame (to start the
-    map at once), at most ``max_new_per_frame`` later. A feature the bank has not predicted inside
+    map at once), at most ``max_new_per_frame`` later (None: FrontEndOptions' values). A feature the
+    bank has not predicted inside
     the image for ``out_of_view_frames`` processed frames is deleted (None: never). Stops after
     ``max_frames`` frames.
     ``on_frame(k, bank, report)`` is called after each processed frame."""
+    defaults = FrontEndOptions()
+    min_visible = defaults.min_visible if min_visible is None else min_visible
+    max_new_per_frame = defaults.max_new_per_frame if max_new_per_frame is None else max_new_per_frame
     rows: dict[str, list] = {name: [] for name in ("frame", "mean", "bounds", "gaussians", "used", "map", "time")}
     t_prev = None
     last_in_view: dict[int, int] = {}   # feature id -> the last processed frame it was predicted in view

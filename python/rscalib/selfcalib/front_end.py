@@ -1,67 +1,24 @@
 """The image front end of self-calibration: corners where the map is thin, patches stored at
 initialisation, and active search by normalised cross-correlation inside each feature's 99 %
 prediction ellipse, refined to sub-pixel by ECC affine alignment (docs/formulation.md §13,
-docs/sog.md §1); FrontEndOptions.subpixel "tracked" also keeps each feature's warp between frames
-(no drift as the view magnifies), "klt" tracks frame to frame (a comparison: it drifts).
+docs/sog.md §1); FrontEndOptions.subpixel "tracked" (the default) also keeps each feature's warp
+between frames (no drift as the view magnifies).
 :class:`ImageFrontEnd` is the measurement source of :func:`rscalib.selfcalib.driver.run_bank` for
 images."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Optional
 
 import cv2
 import numpy as np
 
-from ..errors import InputError
+from .options import FrontEndOptions
 
 if TYPE_CHECKING:
     from .driver import FrameSearch
 
 CHI2_2DOF_99 = 9.210340371976184
-SUBPIXEL_MODES = ("affine", "parabola", "tracked", "klt")
-
-
-@dataclass
-class FrontEndOptions:
-    """Image front end (sizes for 320x240; scaled with the image width)."""
-
-    patch_half_px: int = 5            # 11x11 patches, as in Civera's code
-    ncc_threshold: float = 0.8
-    min_visible: int = 20             # add features while fewer were used in the update
-    max_new_per_frame: int = 10
-    min_separation_px: float = 20.0   # new corners away from predicted features
-    max_search_half_px: float = 60.0  # cap the ellipse's bounding box (first frames span f widely)
-    corner_quality: float = 0.01
-    # "affine": refine each NCC peak by ECC alignment of the patch under an affine warp (the stored
-    # patch is never re-cut, so scale/rotation changes as the camera moves would otherwise bias the
-    # match); "parabola": parabola through the NCC peak only; "tracked": each feature keeps the
-    # warp (warp_model) of its last match, NCC searches with the original patch warped by it, ECC
-    # starts from it, and a match ECC cannot refine is dropped (no parabola fallback): the reference
-    # is always the first view, so errors do not accumulate, and walking towards a wall (scale > 1.7)
-    # no longer falls back to an unwarped patch (docs/sog.md §17: the drift of "affine").
-    subpixel: str = "affine"
-    max_refine_shift_px: float = 1.5
-    refine_half_px: int = 5           # "tracked": half size of the ECC template
-    max_warp_change: float = 1.25     # "tracked": per-frame change of the warp's singular values
-    max_warp_scale: float = 4.0       # "tracked": the warp's singular values within [1/this, this]
-    warp_model: str = "affine"        # "tracked": "affine" or "homography" (perspective across the patch)
-    # "klt": pyramidal Lucas-Kanade from the previous frame, started at the prediction, kept when the
-    # backward track returns within klt_max_fb_px, inside the 99 % ellipse and the original patch's
-    # NCC there is at least ncc_threshold; the others are searched as "affine" does (re-anchored).
-    # Measured: it drifts (a chain of frame-to-frame matches), "tracked" does not.
-    klt_max_fb_px: float = 0.5
-    klt_levels: int = 3
-
-    def scaled(self, width: int) -> FrontEndOptions:
-        """These options for images ``width`` pixels wide (the sizes above are for 320 px)."""
-        scale = width / 320.0
-        return FrontEndOptions(**{**self.__dict__,
-                                  "patch_half_px": max(3, int(round(self.patch_half_px * max(1.0, scale ** 0.5)))),
-                                  "refine_half_px": max(3, int(round(self.refine_half_px * max(1.0, scale ** 0.5)))),
-                                  "min_separation_px": self.min_separation_px * scale,
-                                  "max_search_half_px": self.max_search_half_px * scale})
 
 
 def _shift(du: float, dv: float) -> np.ndarray:
@@ -271,64 +228,20 @@ class ImageFrontEnd:
 
     def __init__(self, options: Optional[FrontEndOptions], image_size: tuple[int, int]) -> None:
         options = options or FrontEndOptions()
-        if options.subpixel not in SUBPIXEL_MODES:
-            raise InputError(f"front_end.subpixel must be one of {', '.join(SUBPIXEL_MODES)}, not {options.subpixel!r}")
-        if options.warp_model not in ("affine", "homography"):
-            raise InputError(f"front_end.warp_model must be 'affine' or 'homography', not {options.warp_model!r}")
         self.options = options.scaled(int(image_size[0]))
         # "tracked": the reference covers the search patch down to half scale (moving away)
         reference_half = 2 * max(self.options.patch_half_px, self.options.refine_half_px) + 1 \
             if self.options.subpixel == "tracked" else None
         self.store = PatchStore(self.options.patch_half_px, reference_half)
 
-        self._last_frame: Optional[np.ndarray] = None     # "klt": the previous frame and its matches
-        self._last_uv: dict[int, np.ndarray] = {}
 
     def measure(self, frame: np.ndarray, ids: np.ndarray, uv_pred: np.ndarray,
                 cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        if self.options.subpixel != "klt":
-            return active_search(frame, self.store.patches, ids, uv_pred, cov, self.options)
-        uv, found = self._klt(frame, ids, uv_pred, cov)
-        rest = ~found
-        if rest.any():
-            uv[rest], found[rest] = active_search(frame, self.store.patches, ids[rest], uv_pred[rest], cov[rest],
-                                                  replace(self.options, subpixel="affine"))
-        self._last_frame = frame
-        self._last_uv = {int(fid): p for fid, p, ok in zip(ids, uv, found) if ok}
-        return uv, found
-
-    def _klt(self, frame: np.ndarray, ids: np.ndarray, uv_pred: np.ndarray, cov: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray]:
-        uv = np.full((len(ids), 2), np.nan)
-        found = np.zeros(len(ids), dtype=bool)
-        have = [i for i, fid in enumerate(ids) if int(fid) in self._last_uv and np.all(np.isfinite(cov[i]))]
-        if self._last_frame is None or not have:
-            return uv, found
-        size = 2 * self.options.patch_half_px + 1
-        lk = dict(winSize=(size, size), maxLevel=self.options.klt_levels, flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
-                  criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
-        start = np.array([self._last_uv[int(ids[i])] for i in have], np.float32).reshape(-1, 1, 2)
-        ahead, ok, _ = cv2.calcOpticalFlowPyrLK(self._last_frame, frame, start,
-                                                uv_pred[have].astype(np.float32).reshape(-1, 1, 2), **lk)
-        back, ok_back, _ = cv2.calcOpticalFlowPyrLK(frame, self._last_frame, ahead, start.copy(), **lk)
-        round_trip = np.linalg.norm((back - start).reshape(-1, 2), axis=1)
-        for j, i in enumerate(have):
-            p = ahead[j, 0].astype(np.float64)
-            d = p - uv_pred[i]
-            if not (ok[j, 0] and ok_back[j, 0] and round_trip[j] <= self.options.klt_max_fb_px
-                    and d @ np.linalg.solve(cov[i] + 1e-9 * np.eye(2), d) <= CHI2_2DOF_99):
-                continue
-            patch = self.store.patches[int(ids[i])]
-            seen = cv2.getRectSubPix(frame, patch.shape[::-1], (float(p[0]), float(p[1])), patchType=cv2.CV_32F)
-            if float(cv2.matchTemplate(seen, patch.astype(np.float32), cv2.TM_CCOEFF_NORMED)[0, 0]) \
-                    >= self.options.ncc_threshold:    # the original patch is still there: no slow drift
-                uv[i], found[i] = p, True
-        return uv, found
+        return active_search(frame, self.store.patches, ids, uv_pred, cov, self.options)
 
     def forget(self, feature_ids: np.ndarray) -> None:
         for fid in feature_ids:
             self.store.patches.pop(int(fid), None)
-            self._last_uv.pop(int(fid), None)
 
     def new_features(self, frame: np.ndarray, count: int, search: FrameSearch) -> np.ndarray:
         """Corners away from the predicted and the matched pixels of ``search``, where a patch can be cut."""
@@ -342,5 +255,3 @@ class ImageFrontEnd:
     def track(self, frame: np.ndarray, feature_ids: np.ndarray, uv: np.ndarray) -> None:
         for fid, p in zip(feature_ids, uv):
             self.store.add(frame, int(fid), p)
-            self._last_uv[int(fid)] = np.asarray(p, np.float64)
-        self._last_frame = frame

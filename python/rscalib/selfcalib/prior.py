@@ -22,15 +22,10 @@ import numpy as np
 
 from .. import _core
 from ..errors import InputError
+from ..reference_cameras import PAPER_PIXEL_SIZE_MM
 
-__all__ = ["InitialBank", "initial_bank", "make_bank", "single_gaussian_grid", "PAPER_CAMERA_PARAMS", "PAPER_IMAGE_SIZE",
-           "PAPER_PIXEL_SIZE_MM"]
+__all__ = ["InitialBank", "initial_bank", "make_bank", "single_gaussian_grid"]
 
-# The paper's camera (Civera et al. 2009, §6: an offline calibration of its 320x240 sequence): the one
-# definition, used by the prior's scaling, the CLI's default pixel pitch and the simulators.
-PAPER_CAMERA_PARAMS = (194.06, 160.22, 128.87, 0.06333, 0.0139)  # f px, cx, cy px, k1 mm^-2, k2 mm^-4
-PAPER_IMAGE_SIZE = (320, 240)
-PAPER_PIXEL_SIZE_MM = 0.0112
 _PAPER_DIAGONAL_PX = 400.0
 _PAPER_HALF_DIAGONAL_MM = PAPER_PIXEL_SIZE_MM * 200.0
 

@@ -1,50 +1,62 @@
 """Outputs of `rscalib selfcalib`: result.json (through rscalib.io.results), camera.yaml (the OpenCV
-pinhole-radtan camera closest to the civera-radial estimate) and history.png (the estimates with
-their 99 % bounds and the number of Gaussians per frame)."""
+pinhole-radtan camera closest to the civera-radial estimate; only when the verdict claims it) and
+history.png (the estimates with their 99 % bounds and the number of Gaussians per frame)."""
 from __future__ import annotations
 
 import textwrap
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..io.camera_formats.civera import civera_to_opencv
 from ..io.cameras import write_opencv_yaml
 from ..io.output_folder import output_set
-from ..io.results import RESULT_FILE, write_result_json
-from .calibrate import PARAM_NAMES, SelfCalibResult, civera_to_opencv
+from ..io.results import write_result_json
+from .result import PARAM_NAMES, SelfCalibResult
+
+if TYPE_CHECKING:
+    from .pipeline import SelfCalibRun
 
 CAMERA_FILE = "camera.yaml"
 HISTORY_PLOT = "history.png"
 
 
-@dataclass
-class SelfCalibOutputs:
-    """What :func:`write_selfcalib_outputs` wrote, and how far the OpenCV camera is from the estimate."""
+def run_summary(run: SelfCalibRun) -> dict:
+    """result.json of a run (without files and provenance): the result's summary, the settings and
+    the verdict block. Not determined: f, cx, cy, k1, k2 are null (their bounds stay: what the data
+    allow) and the unclaimed estimate is kept apart under `not_claimed` (for diagnosis only)."""
+    summary = {**run.result.summary_dict(), "baseline": run.options.baseline,
+               "subpixel": run.options.front_end.subpixel, "timestamps_from": run.timestamps_from,
+               "pixel_size_given_mm": run.options.pixel_size_mm}
+    summary["verdict"] = run.verdict.to_dict()
+    if not run.verdict.claims:
+        summary["not_claimed"] = {name: summary[name] for name in PARAM_NAMES}
+        summary.update({name: None for name in PARAM_NAMES})
+    return summary
 
-    result_json: Path
-    camera_yaml: Path
-    history_png: Path
-    opencv_max_difference_px: float
 
-
-def write_selfcalib_outputs(result: SelfCalibResult, out_dir, *, extra: Optional[dict] = None,
-                            inputs: Optional[dict] = None) -> SelfCalibOutputs:
-    """Write out_dir/result.json (the result's summary, then ``extra`` entries, then the OpenCV
-    camera's description; ``inputs`` go to its provenance), out_dir/camera.yaml and
-    out_dir/history.png."""
-    out = Path(out_dir)
-    summary = {**result.summary_dict(), **(extra or {})}
-    opencv, max_error = civera_to_opencv(result.camera())
-    with output_set(out) as staged:   # the files replace the previous run's as a set, result.json last
-        write_opencv_yaml(opencv, staged / CAMERA_FILE)
-        summary["opencv_camera"] = {"file": CAMERA_FILE, "model": "pinhole-radtan (k1, k2, k3 fitted; p1 = p2 = 0)",
-                                    "max_difference_px": max_error}
-        plot_history(result, staged / HISTORY_PLOT)
-        write_result_json(staged, summary, command="selfcalib", inputs=inputs)
-    return SelfCalibOutputs(result_json=out / RESULT_FILE, camera_yaml=out / CAMERA_FILE, history_png=out / HISTORY_PLOT,
-                            opencv_max_difference_px=max_error)
+def write_selfcalib_run(run: SelfCalibRun, out_dir) -> dict:
+    """Write out_dir/result.json, out_dir/history.png and, only when the verdict claims the
+    calibration, out_dir/camera.yaml (the OpenCV pinhole-radtan camera closest to the civera-radial
+    estimate: io.camera_formats.civera.civera_to_opencv), as one set; returns the result.json dict."""
+    summary = run_summary(run)
+    with output_set(Path(out_dir)) as staged:   # the files replace the previous run's as a set, result.json last
+        files = {"plot": HISTORY_PLOT}
+        if run.verdict.claims:
+            opencv, max_error = civera_to_opencv(run.result.camera())
+            write_opencv_yaml(opencv, staged / CAMERA_FILE)
+            files["opencv_yaml"] = CAMERA_FILE
+            summary["opencv_camera"] = {"file": CAMERA_FILE, "model": "pinhole-radtan (k1, k2, k3 fitted; p1 = p2 = 0)",
+                                        "max_difference_px": max_error}
+        else:
+            summary["opencv_camera"] = None
+            summary["export_notes"] = ["no camera.yaml: the calibration is not determined by this sequence, and a "
+                                       "file for another tool carries only a value the verdict stands behind"]
+        plot_history(run.result, staged / HISTORY_PLOT)
+        summary["files"] = files
+        write_result_json(staged, summary, command=run.command, inputs=run.inputs)
+    return summary
 
 
 def _readable_limits(mean: np.ndarray, lo: np.ndarray, hi: np.ndarray, extra=()) -> tuple[float, float]:

@@ -20,7 +20,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..selfcalib.prior import PAPER_CAMERA_PARAMS, PAPER_IMAGE_SIZE, PAPER_PIXEL_SIZE_MM
+from ..reference_cameras import PAPER_CAMERA_PARAMS, PAPER_IMAGE_SIZE, PAPER_PIXEL_SIZE_MM
 from .trajectories import HandheldRoomMotion
 
 __all__ = [

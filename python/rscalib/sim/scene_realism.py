@@ -42,6 +42,7 @@ import numpy as np
 
 from .._core import CameraModel
 from ..errors import InputError
+from ..reference_cameras import PHONE_CAMERA_PARAMS, PHONE_PIXEL_SIZE_MM
 from .realism import RealismOptions, capture_times, encode_decode, sensor_image
 from .scene_video import SceneRenderer, default_camera, procedural_texture, room_scene
 from .trajectories import RoomWalkTrajectory
@@ -52,9 +53,6 @@ __all__ = ["MOTION_STYLES", "PHONE_CAMERA_PARAMS", "PHONE_PIXEL_SIZE_MM", "ROOM_
 
 MOTION_STYLES = ("walk-forward", "look-around", "sideways-dolly")
 ROOM_SIZE_M = (7.0, 4.0, 2.6)  # long enough to walk 4 m towards a wall
-# The S3 phone of ../shared/data/real_selfcalib_s3phone (its offline calibration, Civera model).
-PHONE_CAMERA_PARAMS = (525.06, 308.65, 236.54, -7.613e-3, 9.388e-4)
-PHONE_PIXEL_SIZE_MM = 0.0070216
 SHARED_DATA_ENV = "RSCALIB_SHARED_DATA"
 _VIDEO_FRAME_STEP = 40  # frames of the phone video used as photographs
 # Tiles per source folder: half natural desk texture, half calibration targets (repeated patterns).

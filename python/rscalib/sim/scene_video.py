@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 
 from .._core import CameraModel
-from ..selfcalib.prior import PAPER_CAMERA_PARAMS, PAPER_IMAGE_SIZE, PAPER_PIXEL_SIZE_MM
+from ..reference_cameras import PAPER_CAMERA_PARAMS, PAPER_IMAGE_SIZE, PAPER_PIXEL_SIZE_MM
 from .target_video import to_uint8
 from .trajectories import RoomWalkTrajectory, Trajectory
 

@@ -8,6 +8,7 @@ import time
 import pytest
 
 import rscalib
+from rscalib.detection.options import DetectOptions
 from rscalib.detection.pipeline import detect_video
 from rscalib.io.cameras import load_camera
 from rscalib.sim.target_video import render_video
@@ -69,19 +70,41 @@ def test_linedelay_cli_on_a_rendered_checkerboard_video(checkerboard_video, tmp_
     assert time.perf_counter() - started < first_s
 
 
+def test_the_python_front_door_gives_the_cli_answer_to_the_last_digit(checkerboard_video, tmp_path):
+    """Issue 29: rscalib.calibrate_video is the command: the same line delay, sigma, verdict and files."""
+    sim = checkerboard_video
+    cache = tmp_path / "cache"
+    proc = subprocess.run([*CLI, "linedelay", sim / "video.avi", "--target", sim / "target.yaml", "--camera",
+                           sim / "camera.yaml", "--out", tmp_path / "cli", "--quiet"], capture_output=True,
+                          text=True, timeout=600, env={**__import__("os").environ, "RSCALIB_CACHE_DIR": str(cache)})
+    assert proc.returncode in (0, 4), proc.stderr
+    cli = json.loads((tmp_path / "cli" / "result.json").read_text())
+    run = rscalib.calibrate_video(sim / "video.avi", sim / "target.yaml", sim / "camera.yaml",
+                                  rscalib.LineDelayOptions(detection=rscalib.DetectOptions(cache_dir=cache)))
+    assert run.line_delay_s == cli["line_delay_s"] and run.line_delay_std_s == cli["line_delay_std_s"]
+    assert run.verdict.to_dict() == cli["verdict"] and run.verdict.exit_code == proc.returncode
+    summary = run.write(tmp_path / "api")
+    api = json.loads((tmp_path / "api" / "result.json").read_text())
+    for key in ("line_delay_s", "line_delay_std_s", "readout_time_s", "normalised_cost", "knots", "self_check",
+                "guidance", "verdict"):
+        assert api[key] == cli[key] == summary[key], key
+    assert sorted(p.name for p in (tmp_path / "api").iterdir()) == sorted(p.name for p in (tmp_path / "cli").iterdir())
+
+
 def test_circle_grid_720p_through_the_api(tmp_path):
     out = tmp_path / "circles"
     render_video(out, line_delay_s=25e-6, fps=30, size=(1280, 720), target="circlegrid", duration_s=2.0,
                  seed=5, supersample=2, progress=False)
     truth = json.loads((out / "truth.json").read_text())
     camera = load_camera(out / "camera.yaml").camera
-    detection = detect_video(out / "video.avi", out / "target.yaml", cache=False, progress=False)
+    detection = detect_video(out / "video.avi", out / "target.yaml", DetectOptions(cache=False), progress=False)
     # the 16:9 frame cuts the grid off at times; circle grids have no partial views
     assert detection.frames_detected >= 0.5 * truth["num_frames"]
-    result = rscalib.calibrate_line_delay(detection.observations, camera)
-    err = result.line_delay_s - truth["line_delay_s"]
+    run = rscalib.calibrate_video(detection, camera=camera)   # detections already made: the same front door
+    err = run.line_delay_s - truth["line_delay_s"]
     assert abs(err) < 0.01 * truth["line_delay_s"]
-    assert abs(err) <= 3 * result.line_delay_std_s
+    assert abs(err) <= 3 * run.line_delay_std_s
+    assert run.verdict.claims and run.line_delay_s == run.result.line_delay_s
 
 
 def test_static_camera_video_exits_3_with_results(tmp_path):
@@ -161,8 +184,18 @@ def test_static_camera_says_not_determined_without_a_number(tmp_path):
     assert proc.returncode == 3, proc.stderr
     assert "not determined" in proc.stdout and "us/row" not in proc.stdout.split("report:")[0], proc.stdout
     result = json.loads((tmp_path / "res" / "result.json").read_text())
-    assert result["verdict"]["status"] == "undetermined"
+    assert result["verdict"]["status"] == "not determined" and result["verdict"]["value"] is None
     assert "Traceback" not in proc.stderr
+    # no number the verdict does not stand behind leaves the tool: result.json claims none, and no file
+    # for another tool is written with the line delay (issue 29)
+    assert result["line_delay_s"] is None and result["readout_time_s"] is None
+    assert result["not_claimed"]["line_delay_s"] is not None
+    for name in ("camera_with_line_delay.yaml", "camchain.yaml", "gyroflow_lens_profile.json", "camera_info.yaml",
+                 "camera.cameramodel", "cameras.txt"):
+        assert not (tmp_path / "res" / name).exists(), name
+    assert any("not determined" in note for note in result["export_notes"])
+    html = (tmp_path / "res" / "report.html").read_text()
+    assert "not determined" in html and "ms (480 rows read out)" not in html
 
 
 def test_linedelay_help_documents_exit_codes_and_flags():

@@ -110,7 +110,7 @@ def test_the_video_is_detected_in_worker_segments(video):
     frames-shipped path."""
     import cv2
 
-    from rscalib.detection.detectors import DetectOptions
+    from rscalib.detection.options import DetectOptions
     from rscalib.detection.pipeline import segment_plan
     from rscalib.detection.tracking import run_length
     from rscalib.io.targets import load_target

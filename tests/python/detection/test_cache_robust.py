@@ -13,6 +13,7 @@ import pytest
 
 import rscalib
 from rscalib.detection.cache import arrays_checksum, load_cache, save_cache
+from rscalib.detection.options import DetectOptions
 from rscalib.detection.pipeline import detect_video
 from rscalib.detection.result import DetectionResult
 from rscalib.io.targets import target_from_dict
@@ -159,15 +160,15 @@ def write_board_frames(folder: Path, count=6) -> Path:
 def test_detect_video_runs_again_after_a_bad_entry_and_says_so(tmp_path):
     frames = write_board_frames(tmp_path / "frames")
     cache = tmp_path / "cache"
-    first = detect_video(frames, CHECKERBOARD, workers=1, cache_dir=cache, progress=False)
+    first = detect_video(frames, CHECKERBOARD, DetectOptions(workers=1, cache_dir=cache), progress=False)
     assert first.frames_detected == 6 and not first.from_cache
     (entry,) = cache.glob("*.npz")
     rewrite(entry, lambda a: a["uv"].__setitem__((0, 0), a["uv"][0, 0] + 5.0), fix_checksum=False)
-    again = detect_video(frames, CHECKERBOARD, workers=1, cache_dir=cache, progress=False)
+    again = detect_video(frames, CHECKERBOARD, DetectOptions(workers=1, cache_dir=cache), progress=False)
     assert not again.from_cache
     np.testing.assert_array_equal(again.observations.uv, first.observations.uv)   # not the tampered corner
     assert any(str(entry) in w and "discarded" in w for w in again.warnings), again.warnings
-    third = detect_video(frames, CHECKERBOARD, workers=1, cache_dir=cache, progress=False)
+    third = detect_video(frames, CHECKERBOARD, DetectOptions(workers=1, cache_dir=cache), progress=False)
     assert third.from_cache and not any("discarded" in w for w in third.warnings)
 
 

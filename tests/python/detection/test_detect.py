@@ -2,13 +2,15 @@
 pixel truth for every target type, the quality checks and their drop reasons, and detect_video
 (parallel workers, cache, counts)."""
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-from rscalib.detection.detectors import DetectOptions, Detector, _outer_ring_alternates, detect_image
+from rscalib.detection.detectors import Detector, _outer_ring_alternates, detect_image
+from rscalib.detection.options import DetectOptions
 from rscalib.detection.pipeline import detect_video
 from rscalib.detection.quality import local_homography_residual
 from rscalib.io.targets import target_from_dict
@@ -308,7 +310,7 @@ def test_detect_video_counts_and_caches(test_video, tmp_path, capsys):
     path, kinds = test_video
     cache = tmp_path / "cache"
     started = time.perf_counter()
-    first = detect_video(path, CHECKERBOARD, workers=2, cache_dir=cache, progress=True)
+    first = detect_video(path, CHECKERBOARD, DetectOptions(workers=2, cache_dir=cache), progress=True)
     first_s = time.perf_counter() - started
     assert not first.from_cache
     assert first.frames_total == 32 and first.image_size == (640, 480)
@@ -327,7 +329,7 @@ def test_detect_video_counts_and_caches(test_video, tmp_path, capsys):
     assert "detecting checkerboard" in capsys.readouterr().err  # the progress bar (stderr)
 
     started = time.perf_counter()
-    again = detect_video(path, CHECKERBOARD, workers=2, cache_dir=cache, progress=False)
+    again = detect_video(path, CHECKERBOARD, DetectOptions(workers=2, cache_dir=cache), progress=False)
     again_s = time.perf_counter() - started
     assert again.from_cache and again_s < 0.25 * first_s, (again_s, first_s)
     np.testing.assert_array_equal(again.observations.uv, obs.uv)
@@ -337,16 +339,15 @@ def test_detect_video_counts_and_caches(test_video, tmp_path, capsys):
     # the key covers the target and the options, not only the video
     other = target_from_dict({"target_type": "checkerboard", "targetCols": 9, "targetRows": 6,
                               "rowSpacingMeters": 0.031, "colSpacingMeters": 0.031})
-    assert not detect_video(path, other, workers=1, cache_dir=cache, progress=False).from_cache
-    strict = detect_video(path, CHECKERBOARD, workers=1, cache_dir=cache, progress=False,
-                          options=DetectOptions(max_blur_px=20.0))
+    assert not detect_video(path, other, DetectOptions(workers=1, cache_dir=cache), progress=False).from_cache
+    strict = detect_video(path, CHECKERBOARD, replace(DetectOptions(max_blur_px=20.0), workers=1, cache_dir=cache), progress=False)
     assert not strict.from_cache and strict.frames_detected == 28
 
 
 def test_one_worker_gives_the_same_detections(test_video, tmp_path):
     path, _ = test_video
-    parallel = detect_video(path, CHECKERBOARD, workers=2, cache=False, progress=False)
-    serial = detect_video(path, CHECKERBOARD, workers=1, cache=False, progress=False)
+    parallel = detect_video(path, CHECKERBOARD, DetectOptions(workers=2, cache=False), progress=False)
+    serial = detect_video(path, CHECKERBOARD, DetectOptions(workers=1, cache=False), progress=False)
     np.testing.assert_array_equal(parallel.observations.uv, serial.observations.uv)
     assert parallel.dropped == serial.dropped
 
@@ -354,12 +355,12 @@ def test_one_worker_gives_the_same_detections(test_video, tmp_path):
 def test_corrupt_cache_is_ignored(test_video, tmp_path):
     path, _ = test_video
     cache = tmp_path / "cache"
-    detect_video(path, CHECKERBOARD, workers=1, cache_dir=cache, progress=False)
+    detect_video(path, CHECKERBOARD, DetectOptions(workers=1, cache_dir=cache), progress=False)
     (entry,) = cache.glob("*.npz")
     entry.write_bytes(b"garbage")
-    result = detect_video(path, CHECKERBOARD, workers=1, cache_dir=cache, progress=False)
+    result = detect_video(path, CHECKERBOARD, DetectOptions(workers=1, cache_dir=cache), progress=False)
     assert not result.from_cache and result.frames_detected == 24
-    assert detect_video(path, CHECKERBOARD, workers=1, cache_dir=cache, progress=False).from_cache
+    assert detect_video(path, CHECKERBOARD, DetectOptions(workers=1, cache_dir=cache), progress=False).from_cache
 
 
 def test_detect_video_memory_does_not_grow_with_length(tmp_path):
@@ -372,7 +373,7 @@ def test_detect_video_memory_does_not_grow_with_length(tmp_path):
         writer.write(views[i % 3])
     writer.release()
     tracemalloc.start()
-    result = detect_video(path, CHECKERBOARD, workers=1, cache=False, progress=False)
+    result = detect_video(path, CHECKERBOARD, DetectOptions(workers=1, cache=False), progress=False)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     assert result.frames_detected == 120

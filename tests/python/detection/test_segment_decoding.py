@@ -3,6 +3,7 @@ video in whole runs, a segment's seek is verified against the frame its predeces
 next, and the detections are exactly those of one sequential pass (also when a seek lands
 elsewhere: then the video is decoded in the main process)."""
 from concurrent.futures import Future
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -10,7 +11,8 @@ import numpy as np
 import pytest
 
 from rscalib.detection import pipeline
-from rscalib.detection.detectors import DetectOptions, Detector
+from rscalib.detection.detectors import Detector
+from rscalib.detection.options import DetectOptions
 from rscalib.detection.pipeline import detect_video, segment_plan
 from rscalib.detection.tracking import RunDetector
 from rscalib.io import video as video_module
@@ -145,8 +147,8 @@ def test_a_seek_that_lands_elsewhere_is_not_used(mpeg4, monkeypatch):
     assert by_segments(video, monkeypatch) is None
     # detect_video then decodes in this process and gives the one-pass result
     monkeypatch.setattr(pipeline, "_start_pool", lambda workers, target, options: _Pool())
-    result = detect_video(video, BOARD, workers=2, cache=False, progress=False, options=OPTIONS)
-    reference = detect_video(video, BOARD, workers=1, cache=False, progress=False, options=OPTIONS)
+    result = detect_video(video, BOARD, replace(OPTIONS, workers=2, cache=False), progress=False)
+    reference = detect_video(video, BOARD, replace(OPTIONS, workers=1, cache=False), progress=False)
     np.testing.assert_array_equal(result.observations.uv, reference.observations.uv)
     np.testing.assert_array_equal(result.frame_numbers, reference.frame_numbers)
     assert result.dropped == reference.dropped
@@ -159,8 +161,8 @@ class _Pool(InProcessPool):
 
 def test_worker_processes_give_the_one_pass_result(video):
     """The real thing: 2 spawned workers decoding their own segments."""
-    two = detect_video(video, BOARD, workers=2, cache=False, progress=False, options=OPTIONS)
-    one = detect_video(video, BOARD, workers=1, cache=False, progress=False, options=OPTIONS)
+    two = detect_video(video, BOARD, replace(OPTIONS, workers=2, cache=False), progress=False)
+    one = detect_video(video, BOARD, replace(OPTIONS, workers=1, cache=False), progress=False)
     assert two.frames_total == one.frames_total == FRAMES and two.dropped == one.dropped
     np.testing.assert_array_equal(two.observations.uv, one.observations.uv)
     np.testing.assert_array_equal(two.observations.frame_times_s, one.observations.frame_times_s)

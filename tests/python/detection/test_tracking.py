@@ -1,11 +1,14 @@
 """Checkerboard tracking (rscalib.detection.tracking): tracked corners agree with full detection and
 with the rendered truth; a wrong track (a jump, an occluder, the board at the border) falls back to
 full detection; detect_video gives the same result with any number of workers; the decode thread."""
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
 
-from rscalib.detection.detectors import DetectOptions, Detector
+from rscalib.detection.detectors import Detector
+from rscalib.detection.options import DetectOptions
 from rscalib.detection.pipeline import _decoded_ahead, detect_video
 from rscalib.detection.tracking import CheckerboardTracker, corners_are_saddles, detect_run, run_length
 from rscalib.errors import InputError
@@ -136,9 +139,9 @@ def test_detect_video_same_result_with_any_workers(sequence, tmp_path):
         writer.write(image)
     writer.release()
     options = DetectOptions(full_detection_every=8)  # 5 runs over the 40 frames
-    one = detect_video(path, BOARD, workers=1, cache=False, progress=False, options=options)
-    two = detect_video(path, BOARD, workers=2, cache=False, progress=False, options=options)
-    full = detect_video(path, BOARD, workers=1, cache=False, progress=False, options=DetectOptions(full_detection_every=1))
+    one = detect_video(path, BOARD, replace(options, workers=1, cache=False), progress=False)
+    two = detect_video(path, BOARD, replace(options, workers=2, cache=False), progress=False)
+    full = detect_video(path, BOARD, replace(DetectOptions(full_detection_every=1), workers=1, cache=False), progress=False)
     assert one.frames_detected == two.frames_detected == full.frames_detected == 40
     np.testing.assert_array_equal(one.observations.uv, two.observations.uv)
     np.testing.assert_array_equal(one.frame_numbers, two.frame_numbers)

@@ -5,16 +5,18 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-from rscalib.detection.detectors import DetectOptions
+from rscalib.detection.options import DetectOptions
 from rscalib.detection.pipeline import detect_video
 from rscalib.detection.result import DetectionResult
-from rscalib.intrinsics import calibrate_intrinsics, select_views
+from rscalib.intrinsics.calibrate import calibrate_detections, select_views
+from rscalib.intrinsics.options import IntrinsicsOptions
 from rscalib.io.cameras import load_camera
 from rscalib.io.targets import target_from_dict
 from rscalib.observations import Observations
@@ -117,10 +119,10 @@ def test_opencv_stills_against_the_reference():
     and as with findChessboardCornersSB's own corners (f 532.2 px), i.e. the bias is the
     reference's, not ours."""
     target = target_from_dict(OPENCV_BOARD)
-    detections = detect_video(STILLS, target, workers=1, cache=False, progress=False)
+    detections = detect_video(STILLS, target, DetectOptions(workers=1, cache=False), progress=False)
     assert detections.frames_total == 13 and detections.frames_detected == 13 and detections.dropped == {}
     assert detections.timestamps == "frame index"
-    result = calibrate_intrinsics(detections)
+    result = calibrate_detections(detections)
     p = dict(zip(result.param_names, result.params))
     std = dict(zip(result.param_names, result.param_std))
     assert abs(p["cx"] - REFERENCE["cx"]) < 2.0 and abs(p["cy"] - REFERENCE["cy"]) < 2.0
@@ -131,9 +133,8 @@ def test_opencv_stills_against_the_reference():
     assert 0.1 < std["fx"] < 1.5 and 0.1 < std["cx"] < 1.5 and std["k1"] < 0.02
     assert result.view_labels[0] == "left01.jpg"
 
-    sample = detect_video(STILLS, target, workers=1, cache=False, progress=False,
-                          options=DetectOptions(subpix_window_px=11))
-    reproduced = calibrate_intrinsics(sample)
+    sample = detect_video(STILLS, target, replace(DetectOptions(subpix_window_px=11), workers=1, cache=False), progress=False)
+    reproduced = calibrate_detections(sample)
     q = dict(zip(reproduced.param_names, reproduced.params))
     for name in ("fx", "fy", "cx", "cy"):
         assert abs(q[name] - REFERENCE[name]) < 0.2, (name, q[name])
@@ -193,7 +194,7 @@ def test_video_calibration_recovers_the_camera(radtan_video, tmp_path):
 
 def test_view_selection_prefers_sharp_spread_views(radtan_video):
     path, _ = radtan_video
-    detections = detect_video(path, CHECKERBOARD, workers=1, cache=False, progress=False)
+    detections = detect_video(path, CHECKERBOARD, DetectOptions(workers=1, cache=False), progress=False)
     n = detections.observations.num_frames
     # pretend half of the frames are soft: they should not be picked
     soft = np.arange(n) % 2 == 1
@@ -214,9 +215,9 @@ def test_fisheye_model(tmp_path):
     board = blurred_board(target, 1500)
     for i, (rvec, tvec) in enumerate(view_poses(target, 16, seed=5, distance=(0.25, 0.4))):
         cv2.imwrite(str(tmp_path / f"{i:02d}.png"), camera.render(target, rvec, tvec, board))
-    detections = detect_video(tmp_path, target, workers=1, cache=False, progress=False)
+    detections = detect_video(tmp_path, target, DetectOptions(workers=1, cache=False), progress=False)
     assert detections.frames_detected >= 12
-    result = calibrate_intrinsics(detections, model="pinhole-equidistant")
+    result = calibrate_detections(detections, IntrinsicsOptions(model="pinhole-equidistant"))
     p = dict(zip(result.param_names, result.params))
     std = dict(zip(result.param_names, result.param_std))
     assert result.param_names == ["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"]
@@ -238,14 +239,14 @@ def test_too_few_views_is_bad_input():
     detections = DetectionResult(obs, 5, 2, {"no_target": 3}, False, (640, 480), np.array([0, 4]),
                                  ["frame 0", "frame 4"], np.array([1.0, 1.0]), "container")
     with pytest.raises(InputError, match="only 2 view"):
-        calibrate_intrinsics(detections)
+        calibrate_detections(detections)
     empty = Observations(np.zeros(0), np.zeros(0, int), np.zeros(0, int), np.zeros((0, 2)), points, (640, 480))
     none = DetectionResult(empty, 5, 0, {"no_target": 5}, False, (640, 480), np.zeros(0, int), [], np.zeros(0),
                            "container")
     with pytest.raises(InputError, match="not found in any of 5 frames"):
-        calibrate_intrinsics(none)
+        calibrate_detections(none)
     with pytest.raises(InputError, match="unknown model"):
-        calibrate_intrinsics(detections, model="civera-radial")
+        calibrate_detections(detections, IntrinsicsOptions(model="civera-radial"))
 
 
 # -- the command line ------------------------------------------------------------------------------

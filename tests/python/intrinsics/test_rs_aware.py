@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from rscalib.detection.result import DetectionResult
-from rscalib.intrinsics import calibrate_intrinsics, still_frames
+from rscalib.intrinsics.calibrate import calibrate_detections, still_frames
 from rscalib.observations import Observations
 
 K = np.array([[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]])
@@ -41,7 +41,7 @@ def _centred_views(n=30, seed=1):
 
 def test_k3_is_not_fitted_when_the_board_stays_in_the_centre():
     det = _detections(_centred_views(), np.arange(30) * 10.0, np.arange(30) * 10)
-    result = calibrate_intrinsics(det)
+    result = calibrate_detections(det)
     assert result.params[8] == 0.0
     assert any("k3 not fitted" in w for w in result.warnings)
     assert result.params[0] == pytest.approx(500, rel=0.02)

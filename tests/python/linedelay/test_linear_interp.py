@@ -13,6 +13,7 @@ from rscalib import _core
 from rscalib._core import CameraModel
 from rscalib.errors import InputError
 from rscalib.linedelay.linear import calibrate_line_delay_linear
+from rscalib.linedelay.options import LineDelayOptions
 from rscalib.sim.target_observations import (
     HandheldTrajectory,
     SimCamera,
@@ -46,7 +47,7 @@ def centres(rotations, translations):
 @pytest.fixture(scope="module")
 def smooth():
     sim = simulate(seed=0)
-    return sim, calibrate_line_delay_linear(sim.observations, camera(), pixel_sigma=0.3)
+    return sim, calibrate_line_delay_linear(sim.observations, camera(), LineDelayOptions(pixel_sigma_px=0.3))
 
 
 def test_recovers_the_line_delay_on_smooth_motion(smooth):
@@ -93,7 +94,7 @@ def test_gaps_break_the_chain_and_isolated_frames_are_dropped():
     obs = sim.observations
     keep = np.ones(obs.num_frames, dtype=bool)
     keep[[18, 19, 20, 21, 22, 23, 40, 42]] = False  # frame 41 is left without neighbours
-    result = calibrate_line_delay_linear(obs.subset_frames(keep), camera(), pixel_sigma=0.3)
+    result = calibrate_line_delay_linear(obs.subset_frames(keep), camera(), LineDelayOptions(pixel_sigma_px=0.3))
     assert result.num_chains == 3
     points_per_frame = np.bincount(obs.frame_index, minlength=obs.num_frames)
     assert result.isolated_observations == points_per_frame[41]
@@ -108,7 +109,7 @@ def test_the_linear_model_degrades_on_fast_shaky_motion(smooth):
     well above 1 and the line delay is biased (both models are measured in
     benchmarks/exp_linear_vs_spline.py)."""
     sim = simulate(seed=0, freq_range_hz=(0.5, 8.0))
-    result = calibrate_line_delay_linear(sim.observations, camera(), pixel_sigma=0.3)
+    result = calibrate_line_delay_linear(sim.observations, camera(), LineDelayOptions(pixel_sigma_px=0.3))
     assert result.normalised_cost > 1.5
     assert abs(result.line_delay_s - D_TRUE) > abs(smooth[1].line_delay_s - D_TRUE)
 
@@ -116,7 +117,7 @@ def test_the_linear_model_degrades_on_fast_shaky_motion(smooth):
 def test_bad_input():
     sim = simulate(seed=0, duration_s=1.0)
     with pytest.raises(InputError):
-        calibrate_line_delay_linear(sim.observations, camera(), pixel_sigma=-1.0)
+        calibrate_line_delay_linear(sim.observations, camera(), LineDelayOptions(pixel_sigma_px=-1.0))
     with pytest.raises(InputError):
         calibrate_line_delay_linear(sim.observations, camera(), max_frame_interval_s=0.0)
 

@@ -13,6 +13,7 @@ import rscalib
 from rscalib import InputError
 from rscalib.linedelay import spline as linedelay
 from rscalib.linedelay.noise import estimate_pixel_sigma, grid_line_quadruples
+from rscalib.linedelay.options import LineDelayOptions
 from rscalib.sim import target_observations as simulate
 
 FPS = 30.0
@@ -161,7 +162,7 @@ def test_knot_adaptation_puts_knots_where_motion_is_fast():
 def test_localization_beats_global_shutter_pnp():
     d = 60e-6
     sim = simulate_video(d, seed=7, duration_s=12.0)
-    result = linedelay.localize(sim.observations, CAMERA, line_delay_s=d)
+    result = linedelay.localize(sim.observations, CAMERA, d)
     assert result.line_delay_s == d  # held fixed
     used = result.used_observations
     times = used.frame_times_s
@@ -195,13 +196,13 @@ def test_camera_size_must_match_observations(small_sim):
     with pytest.raises(InputError):
         linedelay.calibrate_line_delay(small_sim.observations, other)
     with pytest.raises(InputError):
-        linedelay.localize(small_sim.observations, other, line_delay_s=30e-6)
+        linedelay.localize(small_sim.observations, other, 30e-6)
 
 
 @pytest.mark.parametrize("sigma", [-0.3, 0.0])
 def test_pixel_sigma_must_be_positive(small_sim, sigma):
     with pytest.raises(InputError):
-        linedelay.calibrate_line_delay(small_sim.observations, CAMERA, pixel_sigma=sigma)
+        linedelay.calibrate_line_delay(small_sim.observations, CAMERA, LineDelayOptions(pixel_sigma_px=sigma))
 
 
 def test_too_few_observations(small_sim):
@@ -219,7 +220,7 @@ def test_too_few_observations(small_sim):
 
 def test_localize_rejects_non_finite_line_delay(small_sim):
     with pytest.raises(InputError):
-        linedelay.localize(small_sim.observations, CAMERA, line_delay_s=float("nan"))
+        linedelay.localize(small_sim.observations, CAMERA, float("nan"))
 
 
 # --------------------------------------------------------------------------------------------------

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 import rscalib
+from rscalib.linedelay.options import LineDelayOptions
 from rscalib.linedelay.spline import calibrate_line_delay
 from rscalib.sim import target_observations as simulate
 
@@ -23,7 +24,7 @@ def corrupted():
 
 def test_huber_loss_recovers_the_line_delay_despite_outliers(corrupted):
     sim, obs, camera = corrupted
-    result = calibrate_line_delay(obs, camera, robust_loss="huber")
+    result = calibrate_line_delay(obs, camera, LineDelayOptions(robust_loss="huber"))
     assert abs(result.line_delay_s - sim.line_delay_s) / sim.line_delay_s < 0.01
     assert abs(result.line_delay_s - sim.line_delay_s) <= 3 * result.line_delay_std_s
 
@@ -49,7 +50,7 @@ def _shaky(seed: int, duration_s: float = 4.0):
 def test_hand_shake_is_followed_with_knots_down_to_one_frame():
     # 0.5-8 Hz shake: a 2-frame knot floor left J/2N ~ 75 and d several % off with a 0.15 % sigma.
     sim, camera = _shaky(seed=1)
-    result = calibrate_line_delay(sim.observations, camera, pixel_sigma=0.3)
+    result = calibrate_line_delay(sim.observations, camera, LineDelayOptions(pixel_sigma_px=0.3))
     assert result.normalised_cost < 1.2
     assert abs(result.line_delay_s - 30e-6) / 30e-6 < 0.01
     assert abs(result.line_delay_s - 30e-6) <= 3 * result.line_delay_std_s
@@ -57,6 +58,6 @@ def test_hand_shake_is_followed_with_knots_down_to_one_frame():
 
 def test_knots_at_the_floor_that_still_fit_badly_are_flagged():
     sim, camera = _shaky(seed=1)
-    result = calibrate_line_delay(sim.observations, camera, pixel_sigma=0.3, min_segment_s=1.0 / 30.0)
+    result = calibrate_line_delay(sim.observations, camera, LineDelayOptions(pixel_sigma_px=0.3, min_segment_s=1.0 / 30.0))
     assert result.normalised_cost > 1.5
     assert any("shortest allowed length" in w for w in result.warnings)

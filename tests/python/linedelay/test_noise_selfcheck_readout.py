@@ -9,7 +9,7 @@ import pytest
 from rscalib import CameraModel
 from rscalib.errors import InputError
 from rscalib.linedelay import noise, selfcheck
-from rscalib.linedelay.readout import time_window, to_top_down
+from rscalib.linedelay.readout import time_window, to_top_to_bottom
 from rscalib.observations import Observations
 from rscalib.sim.target_observations import simulate_default
 
@@ -156,7 +156,7 @@ def test_readout_transform_is_the_same_geometry(readout):
     uv = np.asarray(cam.project((pts @ R.T) + p))
     obs = Observations(frame_times_s=np.zeros(1), frame_index=np.zeros(20, int), point_id=np.arange(20), uv=uv,
                        target_points=pts, image_size=(640, 480))
-    obs2, cam2 = to_top_down(obs, cam, readout)
+    obs2, cam2 = to_top_to_bottom(obs, cam, readout)
     F = {"bottom-up": np.diag([1.0, -1, 1]), "left-right": np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, 1]]),
          "right-left": np.array([[0.0, 1, 0], [-1, 0, 0], [0, 0, 1]])}[readout]
     Fw = F if readout != "right-left" else np.array([[0.0, 1, 0], [-1, 0, 0], [0, 0, 1]])

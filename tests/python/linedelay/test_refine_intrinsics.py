@@ -25,6 +25,7 @@ from rscalib.linedelay.common import (
     intrinsics_prior_from_std,
     load_intrinsics_prior,
 )
+from rscalib.linedelay.options import LineDelayOptions
 from rscalib.sim import target_observations as simulate
 
 TRUE_PARAMS = np.array([500.0, 502.0, 321.0, 238.5, -0.1, 0.05, 5e-4, -3e-4, 0.0])
@@ -47,7 +48,7 @@ def refined(seed: int, line_delay_s: float = 30e-6, duration_s: float = 4.0):
     if seed not in _RUNS:
         sim = simulate.simulate_observations(CAMERA, line_delay_s, fps=30.0, duration_s=duration_s,
                                              noise_px=0.3, seed=seed)
-        _RUNS[seed] = sim, spline.calibrate_line_delay(sim.observations, wrong_start(), refine_intrinsics=True)
+        _RUNS[seed] = sim, spline.calibrate_line_delay(sim.observations, wrong_start(), LineDelayOptions(refine_intrinsics=True))
     return _RUNS[seed]
 
 
@@ -157,7 +158,7 @@ def test_a_tight_prior_gives_the_fixed_camera_answer():
     sim = simulate.simulate_observations(CAMERA, 30e-6, fps=30.0, duration_s=3.0, noise_px=0.3, seed=3103)
     fixed = spline.calibrate_line_delay(sim.observations, CAMERA)
     tight = intrinsics_prior_from_std(CAMERA, [1e-6] * 8 + [0.0], "test: tight")
-    joint = spline.calibrate_line_delay(sim.observations, CAMERA, refine_intrinsics=True, intrinsics_prior=tight)
+    joint = spline.calibrate_line_delay(sim.observations, CAMERA, LineDelayOptions(refine_intrinsics=True, intrinsics_prior=tight))
     assert abs(joint.line_delay_s - fixed.line_delay_s) < 0.02 * fixed.line_delay_std_s
     assert np.allclose(joint.camera.params, TRUE_PARAMS, atol=1e-5)
     assert math.isclose(joint.line_delay_std_s, fixed.line_delay_std_s, rel_tol=0.02)
@@ -195,20 +196,25 @@ def test_a_prior_from_an_intrinsics_result_json(tmp_path):
 
 def test_the_flag_needs_the_spline_and_its_prior_needs_the_flag():
     from rscalib.cli import build_parser
-    from rscalib.cli.linedelay import _refine_options
+    from rscalib.cli.linedelay import line_delay_options
 
     args = build_parser().parse_args(["linedelay", "v.avi", "--target", "t.yaml", "--camera", "c.yaml", "--out", "o",
                                       "--intrinsics-prior", "r.json"])
     with pytest.raises(InputError, match="--refine-intrinsics"):
-        _refine_options(args)
+        line_delay_options(args)
     args = build_parser().parse_args(["linedelay", "v.avi", "--target", "t.yaml", "--camera", "c.yaml", "--out", "o"])
-    assert _refine_options(args) == {}
+    options = line_delay_options(args)
+    assert not options.refine_intrinsics and options.intrinsics_prior is None
+    args = build_parser().parse_args(["linedelay", "v.avi", "--target", "t.yaml", "--camera", "c.yaml", "--out", "o",
+                                      "--trajectory", "linear", "--refine-intrinsics"])
+    with pytest.raises(InputError, match="only for the spline"):
+        line_delay_options(args)
 
 
 def _verdict_of(self_check, normalised_cost=1.0, **extra):
     from types import SimpleNamespace
 
-    from rscalib.linedelay.report import verdict
+    from rscalib.linedelay.judge import judge_line_delay as verdict
 
     uv = np.c_[np.linspace(0, 640, 50), np.linspace(10, 470, 50)]
     result = SimpleNamespace(determined=True, normalised_cost=normalised_cost, frames_used=100, frames_total=100,
@@ -222,10 +228,10 @@ def test_a_failed_self_check_names_the_camera_and_the_flag_first_suspect():
     halves = [{"line_delay_s": 30.4e-6, "line_delay_std_s": 3e-8}, {"line_delay_s": 29.9e-6, "line_delay_std_s": 3e-8}]
     disagree = {"agree": False, "halves": halves, "z": 9.9, "widen": 9.9}
     v = _verdict_of(disagree, intrinsics=None)
-    assert not v.trust and any("--refine-intrinsics" in r for r in v.reasons)
+    assert not v.trusted and any("--refine-intrinsics" in r for r in v.reasons)
     # already refined, or a trajectory model without the option: no such advice
     assert not any("--refine-intrinsics" in r for r in _verdict_of(disagree, intrinsics={"fx": 1}).reasons)
     assert not any("--refine-intrinsics" in r for r in _verdict_of(disagree).reasons)
     # every check passed: trusted, nothing to suggest
     v = _verdict_of({"agree": True}, intrinsics=None)
-    assert v.trust and not v.reasons
+    assert v.trusted and not v.reasons

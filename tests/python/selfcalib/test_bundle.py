@@ -7,10 +7,12 @@ import numpy as np
 import pytest
 
 import rscalib.selfcalib.bundle as bundle_module
+from rscalib.reference_cameras import PAPER_PIXEL_SIZE_MM
 from rscalib.selfcalib.bundle import TrackRecorder, build_problem, bundle_adjust, project_civera, residuals_and_jacobian
-from rscalib.selfcalib.calibrate import default_options
 from rscalib.selfcalib.driver import run_bank
-from rscalib.selfcalib.prior import PAPER_PIXEL_SIZE_MM, make_bank
+from rscalib.selfcalib.engine import sog_options
+from rscalib.selfcalib.options import SelfCalibOptions
+from rscalib.selfcalib.prior import make_bank
 from rscalib.selfcalib.rolling_shutter import timed_frames
 from rscalib.sim.scene_features import (
     PAPER_CAMERA,
@@ -28,7 +30,7 @@ REFERENCE_ROW = 119.5
 def _recorded_run(sequence):
     source = TrueCorrespondences(sequence)
     recorder = TrackRecorder(source, unwrap=True)
-    bank = make_bank(320, 240, PAPER_PIXEL_SIZE_MM, options=default_options())
+    bank = make_bank(320, 240, PAPER_PIXEL_SIZE_MM, options=sog_options(SelfCalibOptions()))
     history = run_bank(bank, timed_frames(source.frames()), recorder, on_frame=recorder.on_frame)
     return history.mean[-1].copy(), recorder.tracks()
 
@@ -177,47 +179,47 @@ def _fake_bundle(camera, half_width, points=60, status=1, step_sigma=0.0):
 
 
 def test_determined_needs_a_narrow_f_with_the_drift_shift_included():
-    from rscalib.selfcalib.calibrate import judge_bundle
+    from rscalib.selfcalib.judge import judge_bundle
 
     prior = np.array([[80.0, 630.0], [140.0, 180.0], [100.0, 140.0], [-0.1, 0.1], [-0.01, 0.03]])
     camera = [194.0, 160.0, 120.0, 0.06, 0.014]
     half = np.array([1.0, 1.0, 1.0, 1e-3, 1e-4])
     ba = _fake_bundle(camera, half)
     same = _fake_bundle(camera, half)
-    determined, reason, bounds = judge_bundle(ba, same, "", prior)
+    determined, reason, bounds = judge_bundle(ba, same, "", prior, 0.02)
     assert determined and "clustered" in reason
     np.testing.assert_allclose(bounds[:, 1] - bounds[:, 0], 2 * half)
     # the pieces' adjustment 3 px away: the shift counts as one more standard error, and f is no
     # longer known to 2 %
     shifted = _fake_bundle([197.0, *camera[1:]], half)
-    determined, reason, bounds = judge_bundle(ba, shifted, "", prior)
+    determined, reason, bounds = judge_bundle(ba, shifted, "", prior, 0.02)
     assert not determined and "pin f only" in reason
     np.testing.assert_allclose(bounds, prior)           # the prior's, which contain the estimate
-    wide_enough = judge_bundle(ba, shifted, "", prior, max_f_half_width=0.05)
+    wide_enough = judge_bundle(ba, shifted, "", prior, 0.05)
     assert wide_enough[0]
     np.testing.assert_allclose(wide_enough[2][0, 1] - 194.0, 2.5758293035489004 * np.hypot(1 / 2.5758293035489004, 3))
     # too few tracks, not converged, no drift check, no adjustment: not determined, with the reason
-    assert "feature tracks" in judge_bundle(_fake_bundle(camera, half, points=12), same, "", prior)[1]
+    assert "feature tracks" in judge_bundle(_fake_bundle(camera, half, points=12), same, "", prior, 0.02)[1]
     assert "did not converge" in judge_bundle(_fake_bundle(camera, half, status=0, step_sigma=0.5), same, "",
-                                              prior)[1]
-    assert judge_bundle(_fake_bundle(camera, half, status=0, step_sigma=0.05), same, "", prior)[0]
+                                              prior, 0.02)[1]
+    assert judge_bundle(_fake_bundle(camera, half, status=0, step_sigma=0.05), same, "", prior, 0.02)[0]
     assert "over 1000 sigma" in judge_bundle(_fake_bundle(camera, half, status=0, step_sigma=1e80), same, "",
-                                             prior)[1]
-    assert "drift check" in judge_bundle(ba, None, "only 3 features", prior)[1]
-    assert not judge_bundle(None, None, "no tracks", prior)[0]
+                                             prior, 0.02)[1]
+    assert "drift check" in judge_bundle(ba, None, "only 3 features", prior, 0.02)[1]
+    assert not judge_bundle(None, None, "no tracks", prior, 0.02)[0]
     # a line delay that reads 240 rows in more than 1.25 frames (30 fps) is no shutter: not determined
     for delay_us, lo_us, hi_us, ok in [(60.0, 50.0, 70.0, True), (300.0, 200.0, 400.0, False),
                                        (-300.0, -400.0, -200.0, False), (150.0, -10.0, 300.0, True)]:
         shutter = _fake_bundle(camera, half)
         shutter.line_delay_s, shutter.line_delay_bounds_99_s = delay_us * 1e-6, np.array([lo_us, hi_us]) * 1e-6
         shutter.extra["frame_interval_s"] = 1 / 30
-        verdict = judge_bundle(shutter, same, "", prior, image_height=240)
+        verdict = judge_bundle(shutter, same, "", prior, 0.02, image_height=240)
         assert verdict[0] is ok, (delay_us, verdict[1])
         assert ok or "does not fit" in verdict[1]
-        assert judge_bundle(shutter, same, "", prior)[0]              # without the image height: not checked
+        assert judge_bundle(shutter, same, "", prior, 0.02)[0]              # without the image height: not checked
     # an estimate outside the prior widens the reported bounds to include it
     far = _fake_bundle([700.0, *camera[1:]], np.array([100.0, 1, 1, 1e-3, 1e-4]))
-    assert judge_bundle(far, far, "", prior)[2][0, 1] == 700.0
+    assert judge_bundle(far, far, "", prior, 0.02)[2][0, 1] == 700.0
 
 
 def test_points_behind_a_camera_are_dropped_with_their_observations(run):

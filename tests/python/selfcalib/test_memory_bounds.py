@@ -16,14 +16,15 @@ import pytest
 
 from rscalib import InputError
 from rscalib.io import limits
-from rscalib.selfcalib.calibrate import (
+from rscalib.selfcalib.driver import run_bank
+from rscalib.selfcalib.engine import (
     FILTER_MEMORY_FACTOR,
-    default_options,
+    calibrate_frames,
     map_size_bound,
     predicted_memory_bytes,
-    self_calibrate,
+    sog_options,
 )
-from rscalib.selfcalib.driver import run_bank
+from rscalib.selfcalib.options import SelfCalibOptions
 from rscalib.selfcalib.prior import initial_bank, make_bank, single_gaussian_grid
 from rscalib.sim.scene_features import TrueCorrespondences, simulate_sequence
 from rscalib.sim.trajectories import HandheldRoomMotion
@@ -80,7 +81,7 @@ def sweep():
 
 
 def run_sweep(sequence, max_features, out_of_view_frames):
-    options = default_options()
+    options = sog_options(SelfCalibOptions())
     options.max_features = max_features
     grid = single_gaussian_grid(320, 240, f0=200.0, f_sigma=10.0)
     bank = make_bank(320, 240, options=options, bank=initial_bank(320, 240, **grid))
@@ -98,7 +99,7 @@ def test_map_stays_under_the_cap_where_it_would_grow(sweep):
 
 
 def test_map_bound_and_refusals():
-    options = default_options()
+    options = sog_options(SelfCalibOptions())
     assert map_size_bound(options, 20, 10, None) == options.max_features + 10
     options.max_features = 0
     assert map_size_bound(options, 20, 10, 100) == 20 + 10 * 99
@@ -106,7 +107,7 @@ def test_map_bound_and_refusals():
         map_size_bound(options, 20, 10, None)
     frames = ((k / 30.0, np.zeros((240, 320), np.uint8)) for k in range(3))   # one pass, length unknown
     with pytest.raises(InputError, match="no map cap"):
-        self_calibrate(frames, (320, 240), options=options, restarts=False)
+        calibrate_frames(frames, (320, 240), SelfCalibOptions(restarts=False), sog=options)
 
 
 def test_self_calibrate_refuses_what_does_not_fit(monkeypatch):
@@ -115,7 +116,7 @@ def test_self_calibrate_refuses_what_does_not_fit(monkeypatch):
     assert needed > 200 * 2 ** 20
     frames = [(k / 30.0, np.zeros((480, 640), np.uint8)) for k in range(3)]
     with pytest.raises(InputError) as error:
-        self_calibrate(frames, (640, 480), restarts=False)
+        calibrate_frames(frames, (640, 480), SelfCalibOptions(restarts=False))
     assert f"{needed:,} bytes" in str(error.value) and "108 Gaussians" in str(error.value)
 
 
@@ -123,10 +124,11 @@ def test_predicted_memory_bounds_the_measured_bank():
     # 108 Gaussians with 50 features, in a fresh process: resident memory growth against the model
     script = textwrap.dedent("""
         import resource, numpy as np
-        from rscalib.selfcalib.calibrate import default_options
+        from rscalib.selfcalib.engine import sog_options
+        from rscalib.selfcalib.options import SelfCalibOptions
         from rscalib.selfcalib.prior import make_bank
         rss = lambda: int(open("/proc/self/status").read().split("VmRSS:")[1].split()[0]) * 1024
-        options = default_options(); options.prune = False
+        options = sog_options(SelfCalibOptions()); options.prune = False
         bank = make_bank(640, 480, 0.0070216, options=options)
         base = rss()
         rng = np.random.default_rng(0)

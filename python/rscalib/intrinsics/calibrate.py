@@ -1,37 +1,30 @@
-"""Intrinsic calibration from target detections with OpenCV (Zhang 2000, as in cv2.calibrateCamera).
+"""Intrinsic calibration from target detections with OpenCV (Zhang 2000, as in cv2.calibrateCamera):
+the engine of the intrinsics job (its front door is pipeline.calibrate_intrinsics).
 
-`calibrate_intrinsics` picks views (all of them for a few stills; for a video the sharpest,
+`calibrate_detections` picks views (all of them for a few stills; for a video the sharpest,
 most varied `max_views`), runs cv2.calibrateCameraExtended (pinhole-radtan) or
 cv2.fisheye.calibrate (pinhole-equidistant), and reports the RMS, per-view errors and the
-standard deviations of the parameters. `write_intrinsics` writes camera.yaml (OpenCV
-FileStorage), the same camera for Kalibr, Gyroflow, ROS, mrcal and COLMAP, the detections as
-mrcal's corners.vnl, and result.json.
+standard deviations of the parameters.
 """
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Optional
 
 import cv2
 import numpy as np
 
-from ._core import CameraModel
-from .detection.detectors import DETECTOR_VERSION
-from .detection.result import DetectionResult
-from .errors import InputError
-from .io.camera_formats.mrcal import write_corners_vnl
-from .io.cameras import camera_from_opencv, opencv_matrices, write_camera_set, write_opencv_yaml
-from .io.output_folder import output_set
-from .io.results import write_result_json
+from .._core import CameraModel
+from ..detection.result import DetectionResult
+from ..errors import InputError
+from ..io.cameras import camera_from_opencv, opencv_matrices
+from .options import MIN_VIEWS, IntrinsicsOptions
 
-MODELS = ("pinhole-radtan", "pinhole-equidistant")
 PARAM_NAMES = {
     "pinhole-radtan": ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"],
     "pinhole-equidistant": ["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"],
 }
-MIN_VIEWS = 3
 MIN_POINTS_PER_VIEW = 6
 
 
@@ -215,23 +208,20 @@ def radial_reach(detections: DetectionResult, views: np.ndarray) -> float:
     return float(np.max(np.linalg.norm(uv - centre, axis=1)) / np.hypot(width / 2.0, height / 2.0))
 
 
-def calibrate_intrinsics(detections: DetectionResult, model: str = "pinhole-radtan",
-                         max_views: int = 40, rolling_shutter: bool = True) -> IntrinsicsResult:
-    """Calibrate from detections (see detect.detect_video). InputError when there are too few views.
-
-    rolling_shutter: from a video, use only frames still enough that the rolling shutter does not
-    shear the board (still_frames). The model is chosen by the data: pinhole-radtan fits k3 only
-    when the board reaches K3_MIN_RADIUS of the half-diagonal and k3 is significant."""
-    if model not in MODELS:
-        raise InputError(f"unknown model {model!r} (one of {', '.join(MODELS)})")
-    if max_views < MIN_VIEWS:
-        raise InputError(f"--max-views must be at least {MIN_VIEWS}")
+def calibrate_detections(detections: DetectionResult, options: Optional[IntrinsicsOptions] = None) -> IntrinsicsResult:
+    """Calibrate from detections (see detection.pipeline.detect_video). InputError when there are too
+    few views. options: IntrinsicsOptions (model, max_views, still_frames_only: from a video, use only
+    frames still enough that the rolling shutter does not shear the board, still_frames). The model's
+    terms are chosen by the data: pinhole-radtan fits k3 only when the board reaches K3_MIN_RADIUS of
+    the half-diagonal and k3 is significant."""
+    options = options or IntrinsicsOptions()
+    model, max_views = options.model, options.max_views
     obs = detections.observations
     if obs.num_frames == 0:
         raise InputError(f"the target was not found in any of {detections.frames_total} frames "
                          f"({_dropped_text(detections.dropped)}); check the target file (e.g. its size)")
     warnings = []
-    still = still_frames(detections, warnings) if rolling_shutter else None
+    still = still_frames(detections, warnings) if options.still_frames_only else None
     if still is not None:
         chosen = _select_from(detections, np.flatnonzero(still), max_views)
         views = chosen
@@ -358,62 +348,3 @@ def _dropped_text(dropped: dict) -> str:
     if not dropped:
         return "none dropped"
     return ", ".join(f"{count} {reason.replace('_', ' ')}" for reason, count in sorted(dropped.items()))
-
-
-def write_intrinsics(result: IntrinsicsResult, out_dir, detections: Optional[DetectionResult] = None,
-                     extra: Optional[dict] = None, inputs: Optional[dict] = None,
-                     gyroflow: Optional[dict] = None) -> tuple[Path, Path]:
-    """Write out_dir/camera.yaml (OpenCV FileStorage), the camera files for other tools
-    (io.cameras.write_camera_set: Kalibr, Gyroflow, ROS, mrcal, COLMAP), the detections as mrcal's
-    corners.vnl (when given, on a grid target) and out_dir/result.json. inputs: the provenance's
-    input files ({"images": [...], "target": path}); gyroflow: camera_brand, camera_model, lens_model
-    of the Gyroflow profile. Returns the paths of camera.yaml and result.json."""
-    from ._version import __version__
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out} exists and is not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise InputError(f"cannot create {out}: {error.strerror}") from None
-    camera_path, json_path = out / "camera.yaml", out / "result.json"
-    with output_set(out) as staged:   # the files replace the previous run's as a set, result.json last
-        write_opencv_yaml(result.camera, staged / "camera.yaml", extra={"avg_reprojection_error": float(result.rms_px)})
-        summary = {"rscalib_version": __version__, "detector_version": DETECTOR_VERSION, **result.to_dict()}
-        fps = 0.0
-        if detections is not None and detections.timestamps != "frame index" and \
-                detections.observations.num_frames > 1:
-            fps = float(1.0 / np.median(np.diff(detections.observations.frame_times_s)))
-        exports = write_camera_set(result.camera, staged, None, fps=fps, rms_px=result.rms_px, opencv_name=None,
-                                   num_images=len(result.view_index), gyroflow=gyroflow)
-        files = {"opencv_yaml": "camera.yaml"} | exports.files
-        notes = list(exports.notes)
-        if detections is not None:
-            obs = detections.observations
-            try:
-                write_corners_vnl(staged / "corners.vnl", [str(label) for label in detections.frame_labels],
-                                  obs.frame_index, obs.point_id, obs.uv, obs.target_points)
-                files["mrcal_corners"] = "corners.vnl"
-            except InputError as error:
-                notes.append(f"no corners.vnl: {error}")
-        if exports.details:
-            summary["exports"] = exports.details
-        summary["export_notes"] = notes
-        summary["files"] = files
-        if detections is not None:
-            times = detections.observations.frame_times_s
-            for view, index in zip(summary["views"], result.view_index):
-                view["time_s"] = float(times[index])
-            summary.update({
-                "frames_total": int(detections.frames_total),
-                "frames_detected": int(detections.frames_detected),
-                "dropped": {k: int(v) for k, v in detections.dropped.items()},
-                "timestamps": detections.timestamps,
-                "detections_from_cache": bool(detections.from_cache),
-            })
-            summary["warnings"] = list(detections.warnings) + summary["warnings"]
-        summary.update(extra or {})
-        if inputs is None:
-            inputs = (extra or {}).get("inputs")
-        write_result_json(staged, summary, command="intrinsics", inputs=inputs)
-    return camera_path, json_path
