@@ -20,8 +20,7 @@ from typing import Optional
 
 import numpy as np
 
-from .. import _core
-from .._core import CameraModel
+from .._core import CameraModel, LinearInterpOptions, solve_line_delay_linear, unwrap_rotation_vectors
 from ..errors import InputError
 from ..observations import Observations
 from .common import (
@@ -124,7 +123,7 @@ class LinearInterpResult:
         ok = np.isfinite(translations[:, 0])
         if np.any(ok):
             out[ok, :3] = translations[ok]
-            out[ok, 3:] = _core.unwrap_rotation_vectors(Rotation.from_matrix(rotations[ok]).as_rotvec())
+            out[ok, 3:] = unwrap_rotation_vectors(Rotation.from_matrix(rotations[ok]).as_rotvec())
         return out
 
     def summary_dict(self) -> dict:
@@ -165,14 +164,14 @@ def calibrate_line_delay_linear(observations: Observations, camera: CameraModel,
     used, gs = seed_poses(observations, camera, warnings, min_frames=2)
     sigma, sigma_source = choose_pixel_sigma(used, options.pixel_sigma_px)
 
-    solver = _core.LinearInterpOptions()
+    solver = LinearInterpOptions()
     solver.pixel_sigma = sigma
     solver.standardise_errors = False
     solver.max_frame_interval_s = float(max_frame_interval_s)
     solver.robust_loss = options.robust_loss
     solver.num_threads = SOLVER_THREADS
     initial_poses = np.c_[gs.translation, gs.rotation_vector]
-    summary, refined = _core.solve_line_delay_linear(used.frame_index.astype(np.int32), used.uv, used.points_w(),
+    summary, refined = solve_line_delay_linear(used.frame_index.astype(np.int32), used.uv, used.points_w(),
                                                      used.frame_times_s, camera, initial_poses, d, solver)
     d = summary.line_delay_s
     std = summary.line_delay_std_s

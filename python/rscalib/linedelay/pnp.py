@@ -9,8 +9,7 @@ from typing import Optional
 import cv2
 import numpy as np
 
-from .. import _core
-from .._core import CameraModel
+from .._core import CameraModel, poses_at, rotation_vector_to_matrix, unwrap_rotation_vectors
 from ..errors import InputError
 from ..observations import Observations
 
@@ -139,7 +138,7 @@ def pnp_trajectory(observations: Observations, camera: CameraModel, rows: Option
     readout_s = (line_delay_s or 0.0) * rows
     # the middle of the image's readout (its rows, not the --rows read out): as trajectory.csv
     times = observations.frame_times_s[poses.ok] + 0.5 * (line_delay_s or 0.0) * observations.image_size[1]
-    states = np.c_[poses.translation[poses.ok], _core.unwrap_rotation_vectors(poses.rotation_vector[poses.ok])]
+    states = np.c_[poses.translation[poses.ok], unwrap_rotation_vectors(poses.rotation_vector[poses.ok])]
     points = np.bincount(observations.frame_index, minlength=observations.num_frames)[poses.ok]
     return PnpTrajectory(times_s=times, states=states, frames_total=observations.num_frames,
                          frames_used=int(np.count_nonzero(poses.ok)), observations=int(np.sum(points)),
@@ -155,9 +154,9 @@ def compare_with_pnp(result, camera: CameraModel) -> dict:
     obs = result.used_observations
     t_mid = np.clip(obs.frame_times_s + 0.5 * result.line_delay_s * obs.image_size[1], result.trajectory.t_begin,
                     result.trajectory.t_end)
-    rotations, translations = _core.poses_at(result.trajectory, t_mid)
+    rotations, translations = poses_at(result.trajectory, t_mid)
     centre_rs = -np.einsum("nji,nj->ni", rotations, translations)
-    r_gs = np.stack([_core.rotation_vector_to_matrix(v) for v in poses.rotation_vector])
+    r_gs = np.stack([rotation_vector_to_matrix(v) for v in poses.rotation_vector])
     centre_gs = -np.einsum("nji,nj->ni", r_gs, poses.translation)
     diff = np.linalg.norm(centre_rs - centre_gs, axis=1)
     return {"gs_pnp_rms_px": float(np.sqrt(np.nanmean(poses.rms_px ** 2))), "rs_rms_px": result.rms_px,

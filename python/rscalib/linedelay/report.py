@@ -18,7 +18,6 @@ place with result.json last, replacing the previous run's files in that folder.
 """
 from __future__ import annotations
 
-import base64
 import html
 import json
 import math
@@ -27,12 +26,12 @@ from typing import TYPE_CHECKING, Callable, Optional, Union
 
 import numpy as np  # noqa: E402
 
-from .. import _core  # noqa: E402
-from .._core import CameraModel  # noqa: E402
+from .._core import CameraModel, error_noise_map, unwrap_rotation_vectors  # noqa: E402
 from ..errors import InputError  # noqa: E402
 from ..io.camera_formats.mrcal import write_corners_vnl  # noqa: E402
-from ..io.cameras import FILE_PURPOSES, write_camera_set  # noqa: E402
+from ..io.cameras import write_camera_set  # noqa: E402
 from ..io.output_folder import output_set  # noqa: E402
+from ..io.report_html import Figure, escape, figure_html, list_html, table_html, write_report  # noqa: E402
 from ..io.results import write_result_json  # noqa: E402
 from ..io.trajectory_files import CSV_COLUMNS, write_tum_trajectory  # noqa: E402
 from ..io.trajectory_files import write_trajectory_csv as _write_csv  # noqa: E402
@@ -186,7 +185,7 @@ def plot_covariance_ellipses(result: LineDelayResult, path: Path, count: int = 6
     r = result.pixel_sigma ** 2 * np.eye(2)
     lines = []
     for number, i in enumerate(picks, start=1):
-        a = _core.error_noise_map(result.line_delay_s, velocity[i])
+        a = error_noise_map(result.line_delay_s, velocity[i])
         for cov, color, width in ((r, "0.7", 4.0), (a @ r @ a.T, "r", 1.3)):   # grey wide: visible under red
             values, vectors = np.linalg.eigh(cov)
             angle = np.degrees(np.arctan2(vectors[1, 1], vectors[0, 1]))
@@ -263,7 +262,7 @@ def plot_trajectory(result: Estimate, path: Path) -> Path:
         x = result.trajectory.evaluate(t)
         poses, model = result.frame_poses, "spline"
     frame_t = result.used_observations.frame_times_s
-    rot = _core.unwrap_rotation_vectors(poses.rotation_vector)
+    rot = unwrap_rotation_vectors(poses.rotation_vector)
     fig, axes = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
     for k, name in enumerate("xyz"):
         axes[0].plot(t - t0, x[:, k], lw=1, label=f"p_{name}")
@@ -457,11 +456,6 @@ def _provenance_of(result_path: Path) -> dict:
     return json.loads(result_path.read_text()).get("provenance", {})
 
 
-def _img(path: Path) -> str:
-    data = base64.b64encode(path.read_bytes()).decode("ascii")
-    return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.stem)}">'
-
-
 def _table_rows(summary: dict) -> list[tuple[str, object]]:
     std = summary["line_delay_std_s"]
     if summary.get("trajectory_model") == "linear":
@@ -507,40 +501,6 @@ def _half(h: dict) -> str:
             + ("" if h.get("determined") else " (not determined)"))
 
 
-def files_html(files: dict) -> str:
-    """The files a run wrote, each a link with one line on what it is for (io.cameras.FILE_PURPOSES)."""
-    items = [("result.json", FILE_PURPOSES["result_json"])]
-    for role, name in files.items():
-        if role in FILE_PURPOSES and isinstance(name, str) and role != "report":
-            items.append((name, FILE_PURPOSES[role]))
-    for name in files.get("plots", []):
-        items.append((name, "a plot shown above"))
-    return "<ul>" + "".join(f'<li><a href="{html.escape(n)}">{html.escape(n)}</a>: {html.escape(what)}</li>'
-                            for n, what in items) + "</ul>"
-
-
-def provenance_html(provenance: dict) -> str:
-    """Which rscalib, command line, input files (with SHA-256), camera and target as read."""
-    rows = [("rscalib", provenance.get("rscalib_version")), ("command line", provenance.get("command_line")),
-            ("created (UTC)", provenance.get("created_utc"))]
-    for role, record in (provenance.get("input_files") or {}).items():
-        for r in record if isinstance(record, list) else [record]:
-            count = f", {r['files']} files" if "files" in r else ""
-            rows.append((f"input: {role}", f"{r['path']} ({r['bytes']} bytes{count}; sha256 {r['sha256'][:16]}…)"))
-    camera = provenance.get("camera_as_read")
-    if camera and "model" in camera:
-        values = ", ".join(f"{n} {v:.6g}" for n, v in zip(camera["param_names"], camera["params"]))
-        rows.append(("camera as read", f"{camera['model']} {camera['width']}x{camera['height']} from a "
-                                       f"{camera['format']} file: {values}"))
-    target = provenance.get("target_as_read")
-    if target and "target_type" in target:
-        rows.append(("target as read", ", ".join(f"{k} {v}" for k, v in target.items())))
-    if provenance.get("rows") is not None:
-        rows.append(("rows read out", provenance["rows"]))
-    return "<table>" + "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(v))}</td></tr>"
-                               for k, v in rows if v is not None) + "</table>"
-
-
 def intrinsics_html(summary: dict) -> str:
     """--refine-intrinsics: the refined intrinsics, their sigma, the prior and the correlation with d."""
     ki = summary.get("intrinsics")
@@ -561,43 +521,27 @@ def intrinsics_html(summary: dict) -> str:
 
 def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict,
                 provenance: Optional[dict] = None) -> None:
-    table = "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(val))}</td></tr>"
-                    for k, val in _table_rows(summary))
-    reasons = "".join(f"<li>{html.escape(r)}</li>" for r in v.reasons)
-    warnings = "".join(f"<li>{html.escape(w)}</li>" for w in summary["warnings"])
-    figures = "".join(f"<figure>{_img(p)}<figcaption>{html.escape(name)}</figcaption></figure>" for name, p in plots.items())
+    warnings = summary["warnings"]
     guidance = summary.get("guidance") or {}
-    advice = "".join(f"<li>{html.escape(a)}</li>" for a in guidance.get("advice", []))
-    facts = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(_fact(v))}</td></tr>"
-                    for k, v in guidance.items() if k != "advice")
-    guidance_html = ("<h2>How the video could be better</h2>" + (f"<ul>{advice}</ul>" if advice else
+    facts = [(k, _fact(val)) for k, val in guidance.items() if k != "advice"]
+    guidance_html = ("<h2>How the video could be better</h2>" + (list_html(guidance.get("advice", [])) or
                      "<p>Nothing to change: coverage, motion, blur and drops are fine.</p>")
-                     + f"<table>{facts}</table>") if guidance else ""
+                     + table_html(facts)) if guidance else ""
     check = summary.get("self_check")
     check_html = ""
     if check:
-        halves = "".join(f"<li>{html.escape(_half(h))}</li>" for h in check.get("halves", []))
         state = {True: "agree", False: "disagree", None: "inconclusive"}[check.get("agree")]
         z = "" if check.get("z") is None else f" (z = {check['z']:.2f})"
-        check_html = (f"<h2>Self-check: the two halves {state}{html.escape(z)}</h2><ul>{halves}</ul>"
-                      f"<p>{html.escape(check.get('rule', ''))}</p>")
-    notes = "".join(f"<li>{html.escape(n)}</li>" for n in summary.get("export_notes", []))
-    color = "#1a7f37" if v.trusted else "#b35900"
-    path.write_text(f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
-<style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}}
-table{{border-collapse:collapse}}th,td{{padding:3px 10px;border-bottom:1px solid #ddd;text-align:left}}
-.verdict{{border-left:6px solid {color};padding:0.5em 1em;background:#f6f6f6}}
-figure{{margin:1.5em 0}}img{{max-width:100%}}figcaption{{color:#555;font-size:90%}}</style></head><body>
-<h1>{html.escape(title)}</h1>
-<div class="verdict"><strong>{html.escape(v.headline)}</strong>{'<ul>' + reasons + '</ul>' if reasons else ''}{'' if v.trusted else '<p>How to film a better calibration video: docs/capture.md in the rscalib repository.</p>'}</div>
-<h2>Result</h2><table>{table}</table>
-{check_html}
-{intrinsics_html(summary)}
-{guidance_html}
-{'<h2>Warnings</h2><ul>' + warnings + '</ul>' if warnings else ''}
-<h2>Plots</h2>{figures}
-<h2>Files</h2>{files_html(summary["files"])}{'<p>About the exports:</p><ul>' + notes + '</ul>' if notes else ''}
-<p>Conventions: row 0 of a frame is exposed at its timestamp, row v at t + v·d; trajectory.csv holds the
-world(target)-to-camera pose, trajectory_tum.txt the camera-to-world pose; formats: docs/formats.md.</p>
-<h2>Provenance</h2>{provenance_html(provenance or {})}
-</body></html>""")
+        check_html = (f"<h2>Self-check: the two halves {state}{escape(z)}</h2>"
+                      f"{list_html(_half(h) for h in check.get('halves', []))}<p>{escape(check.get('rule', ''))}</p>")
+    notes = summary.get("export_notes", [])
+    figures = "".join(figure_html(Figure(p, name)) for name, p in plots.items())
+    sections = [f"<h2>Result</h2>{table_html(_table_rows(summary))}", check_html, intrinsics_html(summary),
+                guidance_html, f"<h2>Warnings</h2>{list_html(warnings)}" if warnings else "",
+                f"<h2>Plots</h2>{figures}",
+                f"<p>About the exports:</p>{list_html(notes)}" if notes else "",
+                "<p>Conventions: row 0 of a frame is exposed at its timestamp, row v at t + v·d; trajectory.csv holds "
+                "the world(target)-to-camera pose, trajectory_tum.txt the camera-to-world pose; formats: "
+                "docs/formats.md.</p>"]
+    write_report(path, title, v, sections, files=summary["files"], provenance=provenance,
+                 advice_line="How to film a better calibration video: docs/capture.md in the rscalib repository.")

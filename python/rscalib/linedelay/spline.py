@@ -14,8 +14,7 @@ from typing import Callable, Optional, Union
 
 import numpy as np
 
-from .. import _core
-from .._core import BSpline, CameraModel
+from .._core import BSpline, CameraModel, RsSolverOptions, fit_bspline, solve_line_delay, unwrap_rotation_vectors
 from ..errors import InputError
 from ..observations import Observations
 from . import noise
@@ -133,8 +132,8 @@ def _finite_or_none(x: float) -> Optional[float]:
 
 
 def _solver_options(pixel_sigma: float, *, estimate_line_delay: bool, standardise_errors: bool,
-                    use_motion_prior: bool, robust_loss: str, compute_covariance: bool) -> _core.RsSolverOptions:
-    options = _core.RsSolverOptions()
+                    use_motion_prior: bool, robust_loss: str, compute_covariance: bool) -> RsSolverOptions:
+    options = RsSolverOptions()
     options.pixel_sigma = float(pixel_sigma)
     options.estimate_line_delay = estimate_line_delay
     options.standardise_errors = standardise_errors
@@ -146,7 +145,7 @@ def _solver_options(pixel_sigma: float, *, estimate_line_delay: bool, standardis
     return options
 
 
-def _set_tolerance(options: _core.RsSolverOptions, *, final: bool, covariance: bool) -> None:
+def _set_tolerance(options: RsSolverOptions, *, final: bool, covariance: bool) -> None:
     """Loose for the knot-adaptation rounds, tight for the final solve; sigma_d only when asked."""
     options.max_iterations = _FINAL_MAX_ITERATIONS if final else _ROUND_MAX_ITERATIONS
     options.function_tolerance = _FINAL_FUNCTION_TOLERANCE if final else _ROUND_FUNCTION_TOLERANCE
@@ -166,11 +165,11 @@ def initial_trajectory(observations: Observations, poses: FramePoses, line_delay
     sums = np.bincount(observations.frame_index, weights=observations.uv[:, 1], minlength=observations.num_frames)
     mean_row[counts > 0] = sums[counts > 0] / counts[counts > 0]
     times = observations.frame_times_s[frames] + mean_row[frames] * line_delay_s
-    rotation = _core.unwrap_rotation_vectors(poses.rotation_vector[frames])
+    rotation = unwrap_rotation_vectors(poses.rotation_vector[frames])
     samples = np.c_[poses.translation[frames], rotation]
     times = np.clip(times, t_begin, t_end)
     knots = BSpline.clamped_knots(np.linspace(t_begin, t_end, segments + 1))
-    return _core.fit_bspline(knots, times, samples, acceleration_weight=[acceleration_weight])
+    return fit_bspline(knots, times, samples, acceleration_weight=[acceleration_weight])
 
 
 def _segment_samples(breakpoints: np.ndarray) -> np.ndarray:
@@ -186,7 +185,7 @@ def restricted_trajectory(trajectory: BSpline, t_begin: float, t_end: float, min
     breakpoints = np.r_[t_begin, inside, t_end]
     times = _segment_samples(breakpoints)
     samples = trajectory.evaluate(np.clip(times, trajectory.t_begin, trajectory.t_end))
-    return _core.fit_bspline(BSpline.clamped_knots(breakpoints), times, samples)
+    return fit_bspline(BSpline.clamped_knots(breakpoints), times, samples)
 
 
 def joined_trajectory(pieces: list[BSpline], acceleration_weight: float = 1e-9) -> BSpline:
@@ -196,7 +195,7 @@ def joined_trajectory(pieces: list[BSpline], acceleration_weight: float = 1e-9) 
     breaks = np.unique(np.concatenate([np.asarray(p.breakpoints) for p in pieces]))
     times = [_segment_samples(np.asarray(p.breakpoints)) for p in pieces]
     samples = np.vstack([p.evaluate(t) for p, t in zip(pieces, times)])
-    return _core.fit_bspline(BSpline.clamped_knots(breaks), np.concatenate(times), samples,
+    return fit_bspline(BSpline.clamped_knots(breaks), np.concatenate(times), samples,
                              acceleration_weight=[acceleration_weight])
 
 
@@ -335,7 +334,7 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
         last_chance = round_index == max_rounds - 1
         # a final round usually ends the adaptation: sigma_d comes with it (wasted if it splits again)
         _set_tolerance(solver, final=final, covariance=final and estimate)
-        summary = _core.solve_line_delay(*args, trajectory, d, solver)
+        summary = solve_line_delay(*args, trajectory, d, solver)
         d = summary.line_delay_s
         if refine_intrinsics:  # the next round starts from the refined camera
             camera = _with_params(camera, summary.intrinsics)
@@ -376,7 +375,7 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
     if not (final and adapted):
         # Final polish at tight tolerance on the final knots, with the covariance of d.
         _set_tolerance(solver, final=True, covariance=estimate)
-        summary = _core.solve_line_delay(*args, trajectory, d, solver)
+        summary = solve_line_delay(*args, trajectory, d, solver)
         d = summary.line_delay_s
         if refine_intrinsics:
             camera = _with_params(camera, summary.intrinsics)
@@ -435,7 +434,7 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
         camera=camera if refine_intrinsics else None, intrinsics=intrinsics)
 
 
-def _set_intrinsics_prior(options: _core.RsSolverOptions, camera: CameraModel,
+def _set_intrinsics_prior(options: RsSolverOptions, camera: CameraModel,
                           prior: Optional[IntrinsicsPrior]) -> IntrinsicsPrior:
     """Switches the solver to the joint refinement of the intrinsics with `prior` (default:
     common.default_intrinsics_prior) around `camera`'s parameters (docs/formulation.md §14)."""

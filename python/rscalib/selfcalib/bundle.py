@@ -31,7 +31,7 @@ import scipy.sparse.linalg
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from .. import _core
+from .._core import SogBank, SogUpdateReport
 from ..errors import InputError
 from .rolling_shutter import MAX_GAP_FRAMES
 
@@ -113,7 +113,7 @@ class TrackRecorder:
         self.source.track(self._frame(frame), feature_ids, uv)
         self._new.append((np.asarray(feature_ids, np.int64).copy(), np.asarray(uv, float).copy()))
 
-    def on_frame(self, k: int, bank: _core.SogBank, report: _core.SogUpdateReport) -> None:
+    def on_frame(self, k: int, bank: SogBank, report: SogUpdateReport) -> None:
         ids, uv = self._last
         used = np.asarray(report.used, bool)
         self._rows.append((k, ids[used], uv[used]))

@@ -21,7 +21,7 @@ from typing import Any, Callable, Iterable, Optional, Protocol
 
 import numpy as np
 
-from .. import _core
+from .._core import SogBank, SogUpdateReport
 from ..errors import InputError
 from .options import FrontEndOptions
 
@@ -104,11 +104,11 @@ class SelfCalibHistory:
                 "gaussians": self.gaussians.tolist(), "features_used": self.features_used.tolist()}
 
 
-def run_bank(bank: _core.SogBank, frames: Iterable[tuple[float, Any]], source: MeasurementSource, *,
+def run_bank(bank: SogBank, frames: Iterable[tuple[float, Any]], source: MeasurementSource, *,
              min_visible: Optional[int] = None, max_new_per_frame: Optional[int] = None,
              max_frames: Optional[int] = None,
              out_of_view_frames: Optional[int] = None,
-             on_frame: Optional[Callable[[int, _core.SogBank, _core.SogUpdateReport], None]] = None
+             on_frame: Optional[Callable[[int, SogBank, SogUpdateReport], None]] = None
              ) -> SelfCalibHistory:
     """Run ``bank`` over ``frames``, pairs (time in s, frame) with increasing times; a frame of None
     (unreadable) is skipped. While fewer than ``min_visible`` measurements were used in a frame's

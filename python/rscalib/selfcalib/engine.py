@@ -11,7 +11,7 @@ from typing import Any, Callable, Iterable, Iterator, Optional
 import cv2
 import numpy as np
 
-from .. import _core
+from .._core import SogBank, SogOptions, SogUpdateReport
 from .._progress import Progress, ProgressArg
 from ..errors import InputError
 from ..io.limits import check_memory, frame_memory_bytes
@@ -20,9 +20,9 @@ from .driver import SelfCalibHistory, run_bank
 from .front_end import ImageFrontEnd
 from .judge import (
     RESTART_OFFSET,
-    prior_bounds,
     judge_bundle,
     judge_determined,
+    prior_bounds,
 )
 from .options import SelfCalibOptions
 from .prior import initial_bank, make_bank, single_gaussian_grid
@@ -46,9 +46,9 @@ FILTER_MEMORY_FACTOR = 1.5
 _STATE_WITHOUT_FEATURES = 18
 _INVERSE_DEPTH_SIZE = 6
 
-def sog_options(options: SelfCalibOptions) -> _core.SogOptions:
+def sog_options(options: SelfCalibOptions) -> SogOptions:
     """The bank's options (C++ SogOptions) for these self-calibration options."""
-    sog = _core.SogOptions()
+    sog = SogOptions()
     sog.ransac_hypotheses = int(options.ransac_hypotheses)
     sog.sprt_alpha = float(options.sprt_alpha)
     sog.sprt_beta = float(options.sprt_beta)
@@ -85,7 +85,7 @@ def _frame_factory(frames) -> tuple[Iterable, Optional[Callable[[], Iterable]]]:
         return frames, lambda: frames
     return frames, None
 
-def map_size_bound(options: _core.SogOptions, min_visible: int, max_new_per_frame: int,
+def map_size_bound(options: SogOptions, min_visible: int, max_new_per_frame: int,
                    frames: Optional[int]) -> int:
     """The most features the map can hold: the cap plus one frame's new features (the bank caps
     after each update), or without a cap (max_features <= 0) what ``frames`` frames can add;
@@ -115,7 +115,7 @@ def _frame_count(frames, max_frames: Optional[int], expected_frames: Optional[in
 
 def _run(frames, width: int, height: int, pixel_size_mm, options, front_end, initial, max_frames, on_frame,
          line_delay_s: float, record: bool = False
-         ) -> tuple[_core.SogBank, SelfCalibHistory, ImageFrontEnd, Optional[TrackRecorder]]:
+         ) -> tuple[SogBank, SelfCalibHistory, ImageFrontEnd, Optional[TrackRecorder]]:
     source = front_end if isinstance(front_end, ImageFrontEnd) else ImageFrontEnd(front_end, (width, height))
     bank = make_bank(width, height, pixel_size_mm, options=options, bank=initial)
     gray = _checked_gray(frames, width, height)
@@ -162,9 +162,9 @@ def _bundle(recorder: TrackRecorder, camera0: np.ndarray, pixel_size_mm, frames:
 
 def calibrate_frames(frames, image_size: tuple[int, int], options: Optional[SelfCalibOptions] = None, *,
                      front_end: Optional[ImageFrontEnd] = None, grid: Optional[dict] = None,
-                     sog: Optional[_core.SogOptions] = None, progress: ProgressArg = None,
+                     sog: Optional[SogOptions] = None, progress: ProgressArg = None,
                      expected_frames: Optional[int] = None,
-                     on_frame: Optional[Callable[[int, _core.SogBank, _core.SogUpdateReport], None]] = None
+                     on_frame: Optional[Callable[[int, SogBank, SogUpdateReport], None]] = None
                      ) -> SelfCalibResult:
     """The engine over `frames`: an iterable of (time_s, image), grayscale or BGR uint8, or a callable
     returning a fresh such iterable (then the frames are read again for the restarts of the filter
@@ -206,7 +206,7 @@ def calibrate_frames(frames, image_size: tuple[int, int], options: Optional[Self
     checking = restarts and not bundle and factory is not None and not isinstance(fe, ImageFrontEnd)
     total = None if per_pass is None else per_pass * (3 if checking else 1)
     with Progress(progress, total, "self-calibrating") as bar:
-        def each_frame(k: int, running: _core.SogBank, report: _core.SogUpdateReport) -> None:
+        def each_frame(k: int, running: SogBank, report: SogUpdateReport) -> None:
             bar.update(k + 1, f"f {running.calibration_mean[0]:.1f} px, {running.num_gaussians} Gaussians")
             if on_frame is not None:
                 on_frame(k, running, report)

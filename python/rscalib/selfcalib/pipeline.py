@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Optional, Union
 
-from .. import _core
+from .._core import CameraModel, SogBank, SogUpdateReport
 from .._progress import ProgressArg
 from ..errors import InputError
 from ..io.video import GrayFrames, read_gray_frames
@@ -49,7 +49,7 @@ class SelfCalibRun:
             return None
         return {name: float(v) for name, v in zip(PARAM_NAMES, self.result.mean)}
 
-    def camera(self) -> Optional[_core.CameraModel]:
+    def camera(self) -> Optional[CameraModel]:
         """The civera-radial camera when determined (None when not)."""
         return self.result.camera() if self.verdict.claims else None
 
@@ -69,7 +69,7 @@ class SelfCalibRun:
 
 def self_calibrate(source: Union[PathLike, GrayFrames], options: Optional[SelfCalibOptions] = None, *,
                    progress: ProgressArg = False,
-                   on_frame: Optional[Callable[[int, _core.SogBank, _core.SogUpdateReport], None]] = None
+                   on_frame: Optional[Callable[[int, SogBank, SogUpdateReport], None]] = None
                    ) -> SelfCalibRun:
     """f, the principal point and the radial distortion of the camera that filmed `source` (a video
     file or image folder of a natural scene, or rscalib.io.video.GrayFrames whose `frames` may be a

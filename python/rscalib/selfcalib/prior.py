@@ -20,7 +20,7 @@ from typing import Optional, Sequence, Union
 
 import numpy as np
 
-from .. import _core
+from .._core import SogBank, SogOptions
 from ..errors import InputError
 from ..reference_cameras import PAPER_PIXEL_SIZE_MM
 
@@ -118,12 +118,12 @@ def single_gaussian_grid(width: int, height: int,
 
 
 def make_bank(width: int, height: int, pixel_size_mm: Union[float, Sequence[float]] = PAPER_PIXEL_SIZE_MM,
-              options: Optional[_core.SogOptions] = None, bank: Optional[InitialBank] = None,
-              **grid) -> _core.SogBank:
+              options: Optional[SogOptions] = None, bank: Optional[InitialBank] = None,
+              **grid) -> SogBank:
     """A ready :class:`rscalib._core.SogBank` over :func:`initial_bank` (``grid`` is passed on)."""
     if bank is None:
         bank = initial_bank(width, height, pixel_size_mm, **grid)
     if options is None:
-        options = _core.SogOptions()
-    return _core.SogBank(options, bank.means, bank.covs, bank.weights, (int(width), int(height)),
+        options = SogOptions()
+    return SogBank(options, bank.means, bank.covs, bank.weights, (int(width), int(height)),
                          _pixel_pair(pixel_size_mm))
