@@ -31,4 +31,8 @@ cd "$work"
 env -u LD_LIBRARY_PATH MPLBACKEND=Agg RSCALIB_CACHE_DIR="$work/cache" "$work/venv/bin/rscalib" demo --duration 2 --out demo >"$work/demo.txt" 2>&1 \
   || { cat "$work/demo.txt" >&2; echo "test-wheel: rscalib demo failed in the wheel's environment" >&2; exit 1; }
 grep -E "estimate|error" "$work/demo.txt"
-echo "test-wheel: 1 passed, 0 failed"
+# The guides travel with the wheel: every verdict points at `rscalib guide capture`.
+"$work/venv/bin/rscalib" guide capture >"$work/guide.txt" && grep -q "How to film for rscalib" "$work/guide.txt" \
+  && [ -f "$(dirname "$("$work/venv/bin/rscalib" guide capture --path)")/capture/framing.png" ] \
+  || { echo "test-wheel: rscalib guide capture does not show the installed guide" >&2; exit 1; }
+echo "test-wheel: 2 passed, 0 failed"

@@ -16,14 +16,14 @@ import warnings
 
 from .._version import __version__
 from ..errors import InputError
-from . import batch, demo, flicker, intrinsics, linedelay, selfcalib, simulate
+from . import batch, demo, flicker, guide, intrinsics, linedelay, selfcalib, simulate
 from .common import EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_OK, EXIT_UNDETERMINED  # noqa: F401  (re-exported)
 
 EXIT_INTERRUPTED = 130   # Ctrl-C (128 + SIGINT)
 EXIT_TERMINATED = 143    # SIGTERM (128 + SIGTERM)
 
 # One module per subcommand: add_parser(sub) and run(args); each imports its engine only when run.
-COMMAND_MODULES = [batch, demo, flicker, intrinsics, linedelay, selfcalib, simulate]
+COMMAND_MODULES = [batch, demo, flicker, guide, intrinsics, linedelay, selfcalib, simulate]
 
 
 WORKFLOW = """\
@@ -38,7 +38,7 @@ a typical session (each command: `rscalib COMMAND --help`):
 no target? `rscalib flicker` measures the line delay from a flickering light, `rscalib selfcalib` the
 focal length and distortion from a walk through a textured scene. Try it first: `rscalib demo`.
 --camera reads OpenCV, Kalibr, ROS camera_info, mrcal .cameramodel, COLMAP cameras.txt and Gyroflow files.
-how to film: docs/capture.md; file formats: docs/formats.md (in the rscalib repository)
+how to film: `rscalib guide capture`; file formats: `rscalib guide formats`
 """
 
 

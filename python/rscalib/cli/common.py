@@ -14,7 +14,8 @@ EXIT_NOT_TRUSTED = 4     # estimated, but a check failed (the report says which)
 EXIT_INTERNAL = 1        # an unexpected error (one line; RSCALIB_DEBUG=1 shows the traceback)
 
 # Where a user learns how to film what each command needs; printed with every "do not trust" verdict.
-CAPTURE_GUIDE = "docs/capture.md (in the rscalib repository): how to film for each command"
+# The guide is installed with the package (`rscalib guide capture`, cli/guide.py).
+CAPTURE_GUIDE = "`rscalib guide capture` (how to film for each command)"
 
 
 # ---- argparse `type=` converters: a value out of range is one line naming the option (exit 2),

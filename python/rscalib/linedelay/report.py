@@ -544,4 +544,5 @@ def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict,
                 "the world(target)-to-camera pose, trajectory_tum.txt the camera-to-world pose; formats: "
                 "docs/formats.md.</p>"]
     write_report(path, title, v, sections, files=summary["files"], provenance=provenance,
-                 advice_line="How to film a better calibration video: docs/capture.md in the rscalib repository.")
+                 advice_line="How to film a better calibration video: run `rscalib guide capture` (the guide comes "
+                             "with rscalib).")
