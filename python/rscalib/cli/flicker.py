@@ -5,9 +5,10 @@ Fill FlickerOptions from the flags a user typed, run the front door
 verdict and the result, and return the verdict's exit code: 0 trusted; 2 bad input (missing file,
 frequency <= 0, bad region...); 3 the data do not determine the line delay — no bands, aliasing,
 the methods disagree, or the fitted bands leave periodic structure unexplained — with result.json,
-the plots and report.html still written; 4 estimated but not trusted (a bottom-to-top readout that
-was not given: check --frequency). "No flicker" is exit 3, not 2: the input is valid, it just does
-not contain the answer.
+the plots and report.html still written; 4 estimated but not trusted: check --frequency (a
+bottom-to-top readout that was not given, or band phases that do not follow the timestamps and the
+frequency; flicker/judge.py). "No flicker" is exit 3, not 2: the input is valid, it just does not
+contain the answer.
 """
 from __future__ import annotations
 
@@ -24,8 +25,8 @@ from .common import CAPTURE_GUIDE, FRAMES, ROWS, number
 
 EXIT_CODES_HELP = ("exit codes: 0 the line delay is estimated and every check passed (trust it); 2 bad input (one "
                    "line on stderr); 3 the frames do not determine the line delay (results written, no number "
-                   "claimed); 4 estimated but not trusted (a bottom-to-top readout not given with --readout: "
-                   "check --frequency); 1 internal error")
+                   "claimed); 4 estimated but not trusted: check --frequency (a bottom-to-top readout not given with "
+                   "--readout, or band phases that do not follow the timestamps and the frequency); 1 internal error")
 
 
 def _default(name: str) -> object:
@@ -73,7 +74,8 @@ def add_parser(sub) -> None:
     p.add_argument("--max-frames", type=FRAMES, default=None, metavar="N", help="use the first N readable frames")
     p.add_argument("--method", choices=METHODS, default=None,
                    help="auto (phase drift when the frames have timestamps, cross-checked by the spectrum), "
-                        f"spectrum, phase-drift (default: {_default('method')})")
+                        "spectrum (the bands of each frame alone: for frame times known to be inexact), phase-drift "
+                        f"(default: {_default('method')})")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)
 
