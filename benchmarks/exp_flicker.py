@@ -4,7 +4,7 @@ Rendered videos (rscalib.sim.target_video.render_video, as `rscalib simulate --f
 640x480, 30 fps, 1 s (30 frames), checkerboard on a background, noise 2 grey levels, supersample 1,
 flicker depth 0.3 with a random phase per seed. For each line delay d, light frequency (1 kHz LED,
 100 Hz mains) and camera (static, hand-held motion) over several seeds, the video goes through
-rscalib.flicker.estimate.estimate_line_delay_flicker (= `rscalib flicker`); both estimators are recorded
+rscalib.flicker.pipeline.estimate_line_delay_flicker (= `rscalib flicker`); both estimators are recorded
 when they apply (spectrum: >= 2 periods per frame; phase-drift: uses the frame timestamps). With
 motion, the 1 kHz video also goes through the target method (rscalib.linedelay.pipeline.calibrate_video
 = `rscalib linedelay`).
@@ -28,7 +28,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine_info, write_results  # noqa: E402
 
-from rscalib.flicker.estimate import estimate_line_delay_flicker  # noqa: E402
+from rscalib.flicker.pipeline import estimate_line_delay_flicker  # noqa: E402
 from rscalib.sim.target_video import render_video  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -62,9 +62,11 @@ def run(seeds: int, with_linedelay: bool, work: Path) -> list[dict]:
                                          flicker_phase_rad=phase, progress=False, **RENDER)
                     render_s = time.perf_counter() - started
                     started = time.perf_counter()
-                    res = estimate_line_delay_flicker(video.video_path, f)
+                    run_ = estimate_line_delay_flicker(video.video_path, f)
+                    res = run_.result
                     row = dict(d_true_s=d, frequency_hz=f, motion=motion, seed=seed, flicker_phase_rad=phase,
                                method=res.method, detrend=res.detrend, determined=res.determined,
+                               verdict=run_.verdict.status,
                                line_delay_s=res.line_delay_s, line_delay_std_s=res.line_delay_std_s,
                                cycles_per_frame=res.cycles_per_frame, warnings=res.warnings,
                                estimates=res.estimates, flicker_seconds=time.perf_counter() - started,

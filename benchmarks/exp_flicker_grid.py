@@ -4,7 +4,7 @@ Renderer: rscalib.sim.flicker_light (box-averaged square or sine light, lamp dis
 vignetting, clipping, overlays, noise, JPEG), independent of the estimator's harmonic model. Each
 case draws fresh random parameters from its seed: duty 5-95 %, clipping on/off, 0.3-40 periods per
 frame, 1 or 12 frames, with or without timestamps, top-to-bottom or bottom-to-top readout. Every
-case goes through rscalib.flicker.estimate.estimate_line_delay_flicker (= `rscalib flicker`).
+case goes through rscalib.flicker.pipeline.estimate_line_delay_flicker (= `rscalib flicker`).
 Error: on d when the direction is measured (phase drift) or given, on |d| otherwise.
 
 Usage: .venv/bin/python benchmarks/exp_flicker_grid.py [--cases 56] [--seed0 1300]
@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine_info, write_results  # noqa: E402
 
-from rscalib.flicker.estimate import estimate_line_delay_flicker  # noqa: E402
+from rscalib.flicker.pipeline import estimate_line_delay_flicker  # noqa: E402
 from rscalib.sim.flicker_light import FlickerLight, FlickerScene, render_flicker_frames  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -59,7 +59,9 @@ def case(index: int, seed0: int) -> dict:
                                           noise=float(rng.uniform(0.5, 3.0)), jpeg_quality=jpeg,
                                           seed=seed0 * 1000 + index)
     started = time.perf_counter()
-    res = estimate_line_delay_flicker(images if frames > 1 else images[0], f, times if timestamps else None)
+    run = estimate_line_delay_flicker(images if frames > 1 else images[0], f,
+                                      timestamps_s=times if timestamps else None)
+    res = run.result
     seconds = time.perf_counter() - started
     signed = res.direction_determined
     estimate = res.line_delay_s if signed else abs(res.line_delay_s)
@@ -68,7 +70,8 @@ def case(index: int, seed0: int) -> dict:
     return dict(index=index, seed=[seed0, index], d_true_s=d, frequency_hz=f, cycles_per_frame=cycles, duty=duty,
                 exposure_s=exposure, frames=frames, timestamps=timestamps, negative=negative, clipping=clipping,
                 clipped_fraction=truth["clipped_fraction"], size=[width, height], lamp=scene.lamp,
-                waveform=light.waveform, jpeg=jpeg, determined=res.determined, reason=res.reason, method=res.method,
+                waveform=light.waveform, jpeg=jpeg, determined=res.determined, verdict=run.verdict.status,
+                reason=res.reason, method=res.method,
                 line_delay_s=res.line_delay_s, line_delay_std_s=res.line_delay_std_s, relative_error=err,
                 sigmas=abs(estimate - reference) / res.line_delay_std_s if res.line_delay_std_s > 0 else float("inf"),
                 direction_determined=res.direction_determined, sign_right=bool(np.sign(res.line_delay_s) == np.sign(d))
@@ -84,7 +87,9 @@ def table(rows: list[dict]) -> tuple[str, dict]:
                "max_abs_relative_error": float(np.max(errs)) if len(errs) else None,
                "within_3_sigma": len(within),
                "sign_right": sum(1 for r in det if r["sign_right"]), "sign_measured": sum(1 for r in det
-                                                                                        if r["direction_determined"])}
+                                                                                        if r["direction_determined"]),
+               "verdicts": {v: sum(1 for r in rows if r.get("verdict") == v)
+                            for v in ("trusted", "not trusted", "not determined")}}
     lines = ["| group | cases | determined | median \\|err\\| | max \\|err\\| | within 3σ |", "|---|---|---|---|---|---|"]
     groups = [("all", lambda r: True), ("1 frame", lambda r: r["frames"] == 1),
               ("12 frames, timestamps", lambda r: r["timestamps"]),

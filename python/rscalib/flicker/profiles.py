@@ -8,12 +8,14 @@ black), the clipped strips are used."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Optional, Sequence
 
 import numpy as np
 
 from .._progress import Progress
 from ..errors import InputError
+from .options import roi_box
 
 MIN_ROWS = 16
 STRIPS = 32                      # column strips per row (region choice, clipped pixels)
@@ -42,17 +44,11 @@ class RowProfiles:
 
 
 def _parse_roi(roi, width: int, height: int) -> tuple[slice, slice, Optional[tuple]]:
-    if roi is None:
+    box = roi_box(roi)
+    if box is None:
         return slice(0, height), slice(0, width), None
-    if isinstance(roi, str):
-        parts = roi.replace(" ", "").split(",")
-    else:
-        parts = list(roi)
-    try:
-        x, y, w, h = (int(round(float(c))) for c in parts)
-    except (TypeError, ValueError):
-        raise InputError(f"bad region {roi!r}: give x,y,w,h in pixels") from None
-    if w <= 0 or h <= 0 or x < 0 or y < 0 or x + w > width or y + h > height:
+    x, y, w, h = box
+    if x + w > width or y + h > height:
         raise InputError(f"region {x},{y},{w},{h} is not inside the {width}x{height} image")
     if h < MIN_ROWS:
         raise InputError(f"region has {h} rows; at least {MIN_ROWS} are needed")
@@ -72,8 +68,9 @@ def read_row_profiles(frames: Any, timestamps_s: Optional[Sequence[float]] = Non
                       max_frames: Optional[int] = None, progress: bool = False) -> RowProfiles:
     """Row profiles of frames: an array (H, W) / (N, H, W) / (N, H, W, C), a list of arrays, a
     :class:`rscalib.io.video.FrameSource`, or anything :func:`rscalib.io.video.open_source` reads (video,
-    image folder with optional timestamps.txt, image files). ``max_frames``: the first N usable frames.
-    Image folders without timestamps.txt have no known times (the phase-drift method needs them)."""
+    image folder with optional timestamps.txt, an image file or a list of them). ``max_frames``: the
+    first N usable frames. Image files and folders without timestamps.txt have no known times (the
+    phase-drift method needs them)."""
     if max_frames is not None and int(max_frames) < 1:
         raise InputError("max frames must be >= 1")
     if isinstance(frames, np.ndarray) or (isinstance(frames, (list, tuple)) and len(frames) > 0
@@ -100,9 +97,19 @@ def read_row_profiles(frames: Any, timestamps_s: Optional[Sequence[float]] = Non
     if not times_known and timestamps_s is None:
         result.times_s = None
         result.timestamps_source = "none"
-        result.warnings.append("no frame timestamps (image folder without timestamps.txt): the phase-drift "
-                               "method is unavailable")
+        if len(result.values) > 1:   # one frame has no drift to measure: nothing is missing
+            result.warnings.append(f"no frame timestamps ({_without_times(frames, source)}): the phase-drift "
+                                   "method is unavailable")
     return result
+
+
+def _without_times(frames: Any, source) -> str:
+    """Why a source has no frame times, in its own words."""
+    if isinstance(frames, (str, Path)) and Path(frames).is_dir():
+        return "image folder without timestamps.txt"
+    if source.kind == "images":
+        return "image files have none; put them in a folder with a timestamps.txt"
+    return "the video has neither frame times nor a frame rate"
 
 
 def _profiles(items, total, timestamps_s, roi, max_frames, progress, timestamps_source,

@@ -14,11 +14,17 @@ import pytest
 from scipy import signal
 
 from rscalib.cli import main
-from rscalib.flicker.estimate import estimate_line_delay_flicker
+from rscalib.flicker.options import FlickerOptions
+from rscalib.flicker.pipeline import estimate_line_delay_flicker
 from rscalib.sim.flicker_light import FlickerLight, FlickerScene, render_flicker_frames
 
 Z9 = Path(__file__).resolve().parents[4] / "shared" / "data" / "real_led_frame_z9" / \
     "nikon_z9_8k30p_h265_led500hz_frame.jpg"
+
+
+def estimate(frames, frequency_hz, timestamps_s=None, **options):
+    """The front door's FlickerResult (the engine's estimate behind the verdict)."""
+    return estimate_line_delay_flicker(frames, frequency_hz, FlickerOptions(**options), timestamps_s=timestamps_s).result
 
 
 def within(result, truth, rel):
@@ -35,7 +41,7 @@ def test_fundamental_not_the_harmonic_single_1080p_frame():
     frames, truth = render_flicker_frames(light, scene, (1920, 1080), d, [0.0], exposure_s=20e-6, noise=2.0,
                                           jpeg_quality=85, seed=1)
     assert truth["clipped_fraction"] > 0.05
-    result = estimate_line_delay_flicker(frames[0], 1000.0)
+    result = estimate(frames[0], 1000.0)
     within(result, d, 5e-4)
     assert result.readout_time_s == pytest.approx(15.730e-3, rel=5e-4)
     assert result.readout_direction.startswith("top-to-bottom") and not result.direction_determined
@@ -52,7 +58,7 @@ def test_fully_clipped_laser_bands_are_data(with_times):
     frames, truth = render_flicker_frames(light, FlickerScene(lamp="flat", brightness=3.0), (16, 864), d, times,
                                           exposure_s=36e-6, noise=1.0, seed=2)
     assert truth["clipped_fraction"] > 0.5
-    result = estimate_line_delay_flicker(frames, 5000.0, times if with_times else None)
+    result = estimate(frames, 5000.0, times if with_times else None)
     within(result, d, 1e-4)
     assert result.method == ("phase-drift" if with_times else "spectrum")
 
@@ -67,7 +73,7 @@ def test_scipy_square_wave_duty_10_percent():
         t = i / 29.0 + np.arange(rows) * d
         gain = 0.6 + 0.4 * signal.square(2 * np.pi * f * t + 1.0, duty=0.1)
         frames.append(np.clip(np.rint(255 * scene * gain[:, None] + rng.normal(0, 1.5, scene.shape)), 0, 255))
-    result = estimate_line_delay_flicker(np.array(frames, dtype=np.uint8), f)
+    result = estimate(np.array(frames, dtype=np.uint8), f)
     within(result, d, 1e-4)
 
 
@@ -78,16 +84,16 @@ def test_bottom_to_top_readout_is_negative_with_timestamps():
                          vignetting=0.3, texture=0.3)
     times = np.arange(12) / 29.97
     frames, _ = render_flicker_frames(light, scene, (640, 480), d, times, exposure_s=100e-6, noise=2.0, seed=3)
-    result = estimate_line_delay_flicker(frames, 700.0, times)
+    result = estimate(frames, 700.0, times)
     within(result, d, 1e-3)
     assert result.readout_direction == "bottom-to-top" and result.direction_determined
     assert result.region["bounding_box_xywh"][2] < 500  # the unlit right part is left out
     # without timestamps: |d|, the direction said to be assumed
-    result = estimate_line_delay_flicker(frames, 700.0)
+    result = estimate(frames, 700.0)
     assert result.determined and abs(abs(result.line_delay_s) - abs(d)) < 1e-3 * abs(d)
     assert "assumed" in result.readout_direction
     # the given direction is used when the bands cannot tell
-    result = estimate_line_delay_flicker(frames, 700.0, readout="bottom-to-top")
+    result = estimate(frames, 700.0, readout="bottom-to-top")
     assert result.line_delay_s < 0 and "given" in result.readout_direction
 
 
@@ -96,7 +102,7 @@ def test_blanking_from_timestamps():
     light = FlickerLight(130.0, waveform="sine", off_level=0.4, phase=0.2)
     times = np.arange(20) / fps
     frames, _ = render_flicker_frames(light, FlickerScene(texture=0.3), (320, rows), d, times, noise=1.0, seed=4)
-    result = estimate_line_delay_flicker(frames, 130.0, times)
+    result = estimate(frames, 130.0, times)
     within(result, d, 1e-3)
     assert result.blanking_determined
     true_blank = 1.0 / fps / d - rows
@@ -109,18 +115,21 @@ def test_wrong_frequency_with_timestamps_is_not_trusted():
     light = FlickerLight(1005.0, duty=0.4, off_level=0.3, phase=0.1)
     times = np.arange(30) / 30.0
     frames, _ = render_flicker_frames(light, FlickerScene(texture=0.2), (320, 480), d, times, noise=1.0, seed=5)
-    result = estimate_line_delay_flicker(frames, 1000.0, times)
+    run = estimate_line_delay_flicker(frames, 1000.0, timestamps_s=times)
+    result = run.result
     pd = result.estimates["phase-drift"]
     assert not pd["ok"] and pd["reason"]
+    assert run.verdict.status != "trusted"
     if result.determined:  # the spectrum alone: d off by the frequency error, no more
         assert result.method == "spectrum"
         assert abs(result.line_delay_s - d * 1005 / 1000) < 3 * result.line_delay_std_s
+        assert run.verdict.status == "not trusted" and "check --frequency" in run.verdict.reasons[0]
 
 
 def test_no_periodic_structure_is_refused():
     rng = np.random.default_rng(6)
     frames = np.clip(rng.normal(120, 3, (4, 300, 200)), 0, 255).astype(np.uint8)
-    result = estimate_line_delay_flicker(frames, 1000.0, np.arange(4) / 30.0)
+    result = estimate(frames, 1000.0, np.arange(4) / 30.0)
     assert not result.determined and result.reason
 
 
@@ -160,12 +169,12 @@ def test_edges_sharper_than_a_row_widen_the_single_frame_bound():
                          blob=True, texture=0.144)
     frames, _ = render_flicker_frames(light, scene, (480, 640), d, [0.37], exposure_s=1.384e-6, noise=1.85,
                                       jpeg_quality=92, seed=1300032)
-    result = estimate_line_delay_flicker(frames[0], 2173.8656)
+    result = estimate(frames[0], 2173.8656)
     within(result, d, 2e-3)
     assert result.estimates["spectrum"]["edge_width_rows"] < 1.0
     # a long exposure ramps the edges over rows: no quantisation term, the sigma stays the fit's
     frames, _ = render_flicker_frames(light, scene, (480, 640), d, [0.37], exposure_s=40e-6, noise=1.85, seed=2)
-    soft = estimate_line_delay_flicker(frames[0], 2173.8656)
+    soft = estimate(frames[0], 2173.8656)
     within(soft, d, 1e-3)
     assert soft.estimates["spectrum"]["edge_width_rows"] > 1.0
 
@@ -189,7 +198,13 @@ def test_simulate_led_footage_round_trip(tmp_path, extra, frames_written, has_ti
     frequency = truth["frequency_hz"]
     code = main(["flicker", str(out), "--frequency", f"{frequency:g}", "--out", str(tmp_path / "r"), "--quiet"])
     result = json.loads((tmp_path / "r" / "result.json").read_text())
-    assert code == 0 and result["determined"], result["reason"]
+    assert result["determined"], result["reason"]
+    # a measured bottom-to-top readout that was not given is estimated but not trusted (a wrong
+    # --frequency paints the same bands: flicker/judge.py); every other case is trusted
+    bottom_to_top = "bottom-to-top" in extra
+    assert code == (4 if bottom_to_top else 0)
+    assert result["verdict"]["status"] == ("not trusted" if bottom_to_top else "trusted")
+    assert any("check --frequency" in r for r in result["verdict"]["reasons"]) == bottom_to_top
     d_true = truth["line_delay_s"]
     estimate = result["line_delay_s"] if result["direction_determined"] else abs(result["line_delay_s"])
     reference = d_true if result["direction_determined"] else abs(d_true)
@@ -230,7 +245,7 @@ def test_two_ramps_across_a_dark_gap_are_not_bands():
     scene = FlickerScene(lamp="disk", lamp_radius=0.6716, brightness=2.0116, black_level=0.0297, vignetting=0.0468)
     frames, _ = render_flicker_frames(light, scene, (320, 720), d, [0.33125], exposure_s=6.894e-3, noise=2.57,
                                       jpeg_quality=74, seed=2600016)
-    result = estimate_line_delay_flicker(frames[0], 31.6843)
+    result = estimate(frames[0], 31.6843)
     right_or_refused(result, d)
     assert not result.determined  # well under one period: the spectrum alone cannot tell
 
@@ -245,6 +260,6 @@ def test_long_dark_bands_are_data_not_unlit_scene():
                          vignetting=0.0475, overlay_text="LED TEST 1/2000", texture=0.1165)
     frames, _ = render_flicker_frames(light, scene, (320, 720), d, [0.01625], exposure_s=3.094e-4, noise=0.668,
                                       seed=2600098)
-    result = estimate_line_delay_flicker(frames[0], 428.6505)
+    result = estimate(frames[0], 428.6505)
     right_or_refused(result, d)
     assert result.region["cells_unlit"] == 0
