@@ -6,7 +6,6 @@ for, the files, the provenance). Written as one set (io.output_folder.output_set
 renamed into place with result.json last, replacing the previous run's files in that folder."""
 from __future__ import annotations
 
-import base64
 import html
 import json
 import math
@@ -16,8 +15,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..io.output_folder import output_set
+from ..io.report_html import Figure, figure_html, list_html, table_html, write_report
 from ..io.results import write_result_json
-from ..verdict import NOT_DETERMINED, TRUSTED, Verdict
+from ..verdict import NOT_DETERMINED, Verdict
 from .result import FlickerResult
 
 if TYPE_CHECKING:
@@ -28,8 +28,6 @@ if TYPE_CHECKING:
 CLAIMED = ("line_delay_s", "line_delay_std_s", "line_delay_std_fit_s", "line_delay_std_spread_s", "readout_time_s",
            "period_rows", "cycles_per_frame", "spread_line_delays_s")
 
-FILE_PURPOSES = {"result.json": "every number of the run, with the verdict and provenance (JSON)",
-                 "report.html": "this report"}
 
 
 def run_summary(run: FlickerRun) -> dict:
@@ -166,11 +164,6 @@ def write_flicker_run(run: FlickerRun, out_dir) -> dict:
     return summary
 
 
-def _img(path: Path) -> str:
-    data = base64.b64encode(path.read_bytes()).decode("ascii")
-    return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.stem)}">'
-
-
 def _us(x) -> str:
     return "—" if x is None or not math.isfinite(x) else f"{x * 1e6:.4f} µs/row"
 
@@ -233,60 +226,20 @@ def _estimators_html(summary: dict) -> str:
             + "".join(cells) + "</table>")
 
 
-def _provenance_html(provenance: dict) -> str:
-    rows = [("rscalib", provenance.get("rscalib_version")), ("command line", provenance.get("command_line")),
-            ("created (UTC)", provenance.get("created_utc"))]
-    for role, record in (provenance.get("input_files") or {}).items():
-        for r in record if isinstance(record, list) else [record]:
-            count = f", {r['files']} files" if "files" in r else ""
-            rows.append((f"input: {role}", f"{r['path']} ({r['bytes']} bytes{count}; sha256 {r['sha256'][:16]}…)"))
-    for name, value in (provenance.get("inputs") or {}).items():
-        if name not in (provenance.get("input_files") or {}):
-            rows.append((f"input: {name}", value))
-    if provenance.get("rows") is not None:
-        rows.append(("rows read out", provenance["rows"]))
-    return "<table>" + "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(v))}</td></tr>"
-                               for k, v in rows if v is not None) + "</table>"
-
-
-def _list(items) -> str:
-    return "<ul>" + "".join(f"<li>{html.escape(str(i))}</li>" for i in items) + "</ul>" if items else ""
-
-
 def write_report_html(path: Path, summary: dict, verdict: Verdict, plots: dict, provenance: dict) -> Path:
-    """report.html: the verdict (headline, reasons, caveats), the result table, the estimators, the
-    warnings, each plot (embedded as PNG) with what to look for, the files and the provenance."""
-    table = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>"
-                    for k, v in result_rows(summary))
-    figures = "".join(f"<figure>{_img(p)}<figcaption>{html.escape(caption)}</figcaption></figure>"
-                      for p, caption in plots.values())
-    files = [("result.json", FILE_PURPOSES["result.json"])] + [(n, "a plot shown above") for n in plots] \
-        + [("report.html", FILE_PURPOSES["report.html"])]
-    files_html = "<ul>" + "".join(f'<li><a href="{html.escape(n)}">{html.escape(n)}</a>: {html.escape(w)}</li>'
-                                  for n, w in files) + "</ul>"
-    color = {TRUSTED: "#1a7f37", NOT_DETERMINED: "#6e6e6e"}.get(verdict.status, "#b35900")
-    guide = "" if verdict.trusted else ("<p>How to film flicker bands: docs/capture.md (in the rscalib repository), "
-                                        "the flicker section.</p>")
-    caveats = f"<p>Said with the verdict:</p>{_list(verdict.caveats)}" if verdict.caveats else ""
+    """report.html (io.report_html): the verdict (headline, reasons, caveats), the result table, the
+    estimators, the warnings, each plot (embedded as PNG) with what to look for, the files and the
+    provenance."""
+    figures = "".join(figure_html(Figure(p, caption)) for p, caption in plots.values())
+    caveats = f"<p>Said with the verdict:</p>{list_html(verdict.caveats)}" if verdict.caveats else ""
     warnings = summary.get("warnings") or []
-    title = "rscalib flicker"
-    path.write_text(f"""<!doctype html><html><head><meta charset="utf-8"><title>{title}</title>
-<style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}}
-table{{border-collapse:collapse}}th,td{{padding:3px 10px;border-bottom:1px solid #ddd;text-align:left}}
-.verdict{{border-left:6px solid {color};padding:0.5em 1em;background:#f6f6f6}}
-figure{{margin:1.5em 0}}img{{max-width:100%}}figcaption{{color:#555;font-size:90%}}</style></head><body>
-<h1>{title}</h1>
-<div class="verdict"><p><strong>{html.escape(verdict.status)}:</strong> {html.escape(verdict.headline)}</p>\
-{_list(verdict.reasons)}{caveats}{guide}</div>
-<h2>Result</h2><table>{table}</table>
-{_estimators_html(summary)}
-{'<h2>Warnings</h2>' + _list(warnings) if warnings else ''}
-<h2>Plots</h2>{figures or '<p>No plot could be drawn (see the warnings).</p>'}
-<h2>Files</h2>{files_html}
-<p>Conventions: row v of a frame is exposed at t + v·d (d &lt; 0: the readout runs bottom-to-top); a light of
-intensity frequency f paints bands every 1/(f·|d|) rows; the method: docs/formulation.md, flicker.</p>
-<h2>Provenance</h2>{_provenance_html(provenance)}
-</body></html>
-""")
+    sections = [caveats, f"<h2>Result</h2>{table_html(result_rows(summary))}", _estimators_html(summary),
+                f"<h2>Warnings</h2>{list_html(warnings)}" if warnings else "",
+                f"<h2>Plots</h2>{figures or '<p>No plot could be drawn (see the warnings).</p>'}",
+                "<p>Conventions: row v of a frame is exposed at t + v·d (d &lt; 0: the readout runs bottom-to-top); a "
+                "light of intensity frequency f paints bands every 1/(f·|d|) rows; the method: "
+                "docs/formulation.md, flicker.</p>"]
+    write_report(path, "rscalib flicker", verdict, sections, files=summary.get("files") or {},
+                 provenance=provenance, advice_line="How to film flicker bands: run `rscalib guide capture` "
+                                                    "(the flicker section; the guide comes with rscalib).")
     return path
-

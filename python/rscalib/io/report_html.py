@@ -60,7 +60,8 @@ def verdict_html(verdict, advice_line: str = "") -> str:
     """The verdict box: the headline, the reasons, and (unless trusted) where to learn what to do."""
     reasons = list_html(verdict.reasons)
     after = "" if verdict.trusted or not advice_line else f"<p>{escape(advice_line)}</p>"
-    return f'<div class="verdict"><strong>{escape(verdict.headline)}</strong>{reasons}{after}</div>'
+    return (f'<div class="verdict"><p><strong>{escape(verdict.status)}:</strong> {escape(verdict.headline)}</p>'
+            f"{reasons}{after}</div>")
 
 
 def files_html(files: dict) -> str:
@@ -83,6 +84,9 @@ def provenance_html(provenance: dict) -> str:
         for r in record if isinstance(record, list) else [record]:
             count = f", {r['files']} files" if "files" in r else ""
             rows.append((f"input: {role}", f"{r['path']} ({r['bytes']} bytes{count}; sha256 {r['sha256'][:16]}…)"))
+    for name, value in (provenance.get("inputs") or {}).items():   # settings recorded with the inputs
+        if name not in (provenance.get("input_files") or {}) and value is not None:
+            rows.append((f"input: {name}", value))
     camera = provenance.get("camera_as_read")
     if camera and "model" in camera:
         values = ", ".join(f"{n} {v:.6g}" for n, v in zip(camera["param_names"], camera["params"]))
