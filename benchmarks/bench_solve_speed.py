@@ -58,7 +58,7 @@ def measure(duration_s: float, seed: int) -> dict:
     _core.solve_line_delay = timed
     try:
         started = time.perf_counter()
-        result = spline.calibrate_line_delay(sim.observations, camera)
+        result = spline.calibrate_line_delay(sim.observations, camera, rscalib.LineDelayOptions())
         total_s = time.perf_counter() - started
     finally:
         _core.solve_line_delay = solve

@@ -1,25 +1,29 @@
-"""Shared by the paper-reproduction experiments (benchmarks/exp_*.py, issue #6).
+"""Shared by the experiments (experiments/exp_*.py): the paper reproductions (issue #6) and the
+studies docs/experiments.md reports. They call rscalib's front doors with options (rscalib.__all__)
+and the simulators (rscalib.sim), as a user would; never the engines' modules or rscalib._core.
 
 Rendered videos with exact ground truth go through the same code paths as the CLI
 (`rscalib simulate` -> `rscalib linedelay` / `rscalib localize`):
 
     render_video -> video.avi, truth.json, camera.yaml, target.yaml
-    load_camera(camera.yaml), rscalib.linedelay.pipeline.detect(video.avi, target.yaml)   (as the CLI)
-    calibrate_line_delay / localize
+    rscalib.load_camera(camera.yaml), rscalib.detect_video(video.avi, target.yaml)   (detect, below)
+    rscalib.calibrate_video(detections, camera=..., options=rscalib.LineDelayOptions(...)) /
+    rscalib.localize_video(detections, camera=..., line_delay_s=...)
 
 Videos are cached under build/exp_videos/<config>/ (build/ is git-ignored); a video is re-rendered
 only when its render settings (params.json) differ. Detections are cached by detect_video itself
 ($RSCALIB_CACHE_DIR if set, else build/exp_videos/_detections).
+
+The machine record and the results file are benchmarks/_common.py's (one home for the lab's
+bookkeeping: every file in benchmarks/results/ has the same fields, whichever folder wrote it);
+it is imported here as the module `benchmarks._common`, so it never shadows this `_common`.
 """
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
-import math
 import os
 import shutil
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -27,30 +31,18 @@ from typing import Optional
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import machine_info  # noqa: E402  (benchmarks/_common.py, unchanged)
-
-import rscalib  # noqa: E402
-from rscalib import _core  # noqa: E402
-
 REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:
+    sys.path.append(str(REPO))
+import rscalib  # noqa: E402
+from benchmarks._common import RESULTS, jsonable, machine_info  # noqa: E402,F401  (re-exported)
+from benchmarks._common import write_results as write_results_file  # noqa: E402
+
 VIDEO_ROOT = REPO / "build" / "exp_videos"
-RESULTS = REPO / "benchmarks" / "results"
 FIGURES = REPO / "docs" / "figures"
 
 
 # -- bookkeeping ------------------------------------------------------------------------------------
-
-def git_commit() -> str:
-    try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True,
-                              check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO,
-                               capture_output=True, text=True).stdout.strip()
-        return head + ("+dirty" if dirty else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
 
 def parser(description: str, default_seeds: int, quick_seeds: int) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=description)
@@ -66,32 +58,14 @@ def seeds_from(args) -> int:
     return args._quick_seeds if args.quick else args._default_seeds
 
 
-def write_results(name: str, settings: dict, rows: list, table: str, timings: dict, **extra) -> Path:
-    path = RESULTS / f"{name}.json"
-    result = {"benchmark": name, "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-              "git_commit": git_commit(), "command": " ".join([".venv/bin/python"] + sys.argv),
-              "machine": machine_info(), "settings": settings, "timings_s": timings, **extra,
-              "results": rows, "table_markdown": table}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(_jsonable(result), indent=2) + "\n")
-    print(f"\nwritten {path.relative_to(REPO)}")
-    return path
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return None if not math.isfinite(float(x)) else float(x)
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    return x
+def write_results(name: str, settings: dict, rows, table: str, timings: Optional[dict] = None, *,
+                  path: Optional[Path] = None, **extra) -> Path:
+    """benchmarks/results/<name>.json (or `path`): the machine record, the settings, the timings,
+    any extra fields, the rows and the markdown table (benchmarks/_common.write_results)."""
+    if timings is not None:
+        extra = {"timings_s": timings, **extra}
+    return write_results_file(path or RESULTS / f"{name}.json", name, machine_info(), settings, rows, table,
+                              **extra)
 
 
 def markdown_table(header: list[str], rows: list[list], align: Optional[str] = None) -> str:
@@ -129,7 +103,7 @@ def bluefox_camera() -> rscalib.CameraModel:
 def calm_then_wild_trajectory(camera, target_name: str, duration_s: float, seed: int):
     """The default hand-held trajectory (sim.trajectories.target_trajectory) with calm_then_wild's
     amplitude profile: 0.15 of the default amplitude in the first half, 1.0 in the second."""
-    from rscalib.io.targets import Target
+    from rscalib import Target
     from rscalib.sim.trajectories import calm_then_wild, target_trajectory
 
     return target_trajectory(camera, Target.named(target_name), duration_s, seed, motion=1.0,
@@ -190,16 +164,22 @@ def truth_trajectory(folder: Path):
 
 
 def detect(folder: Path, workers: Optional[int] = None):
-    """What `rscalib linedelay` does before solving (rscalib.linedelay.pipeline.detect): camera and
-    target from the files written next to the video, detect_video with its cache, the checks."""
-    from rscalib.io.cameras import load_camera
-    from rscalib.linedelay import pipeline
-
-    camera = load_camera(folder / "camera.yaml").camera
+    """What `rscalib linedelay` does before solving: the camera and target files written next to the
+    video, and rscalib.detect_video with its cache. Returns (DetectionResult, CameraModel)."""
+    camera = rscalib.load_camera(folder / "camera.yaml").camera
     cache_dir = None if os.environ.get("RSCALIB_CACHE_DIR") else VIDEO_ROOT / "_detections"
-    detection = pipeline.detect(folder / "video.avi", folder / "target.yaml", camera, workers=workers,
-                                cache_dir=cache_dir)
+    detection = rscalib.detect_video(folder / "video.avi", rscalib.load_target(folder / "target.yaml"),
+                                     rscalib.DetectOptions(workers=workers, cache_dir=cache_dir), progress=False)
     return detection, camera
+
+
+def solve_alone(detections, camera, **options):
+    """rscalib.calibrate_video on detections already made (a DetectionResult or rscalib.Observations),
+    with LineDelayOptions(self_check=False, **options): the solve over the whole video without the
+    self-check's halves, as the paper's experiments ran it. Returns the engine's estimate (run.result:
+    the line delay even when the verdict does not claim it, with its trajectory, knots and history)."""
+    options = rscalib.LineDelayOptions(self_check=False, **options)
+    return rscalib.calibrate_video(detections, camera=camera, options=options).result
 
 
 # -- errors against the truth -----------------------------------------------------------------------
@@ -222,7 +202,7 @@ def pose_errors(R_est, p_est, R_true, p_true) -> tuple[np.ndarray, np.ndarray]:
 def trajectory_errors(spline, truth_traj, times_s: np.ndarray) -> dict:
     """Mean / RMS camera-centre error (mm) and orientation error (deg) of a spline vs the truth."""
     times_s = np.clip(times_s, spline.t_begin, spline.t_end)
-    R_e, p_e = _core.poses_at(spline, times_s)
+    R_e, p_e = rscalib.poses_at(spline, times_s)
     R_t, p_t = truth_traj.pose_cw(times_s)
     dp, dr = pose_errors(np.asarray(R_e), np.asarray(p_e), R_t, p_t)
     return {"position_mean_mm": 1e3 * float(np.mean(dp)), "position_rms_mm": 1e3 * float(np.sqrt(np.mean(dp ** 2))),

@@ -1,32 +1,30 @@
-"""Ablation: error standardisation (A R Aᵀ vs plain R) x motion prior (on / off / the paper's Q), on rendered videos.
+"""Ablation: error standardisation (A R Aᵀ vs plain R) x motion prior (on / off), on rendered videos.
 
 Two regimes: rendered 640x480, 30 fps, 10 s hand-held videos at d = 30 us (the same videos as
 exp_localize.py), and the 752x480 BlueFOX videos at 12 MHz (d = 137.5 us, 7 fps: strong
 rolling-shutter effects; the same videos as exp_tables_bluefox.py); 9x6 checkerboard, supersample 2,
-noise 2 grey levels. For each video, `calibrate_line_delay` with the CLI defaults except
-`standardise_errors`, `use_motion_prior` and `motion_prior_q`.
+noise 2 grey levels. For each video, `rscalib.calibrate_video` on its detections with the
+defaults except `LineDelayOptions(self_check=False, standardise_errors=..., motion_prior=...)`.
+(The fifth variant of the recorded results, the paper's motion-prior weight Q, needed the engine's
+`motion_prior_q`, which left the package with issue 29: it is no longer run.)
 Reported per variant: median |relative error| of d, fraction with |d̂ − d| <= 3 σ_d, mean σ_d,
 median J/2N, mean final segments.
 
-Usage: .venv/bin/python benchmarks/exp_ablation.py [--quick] [--seeds N]
+Usage: .venv/bin/python experiments/exp_ablation.py [--quick] [--seeds N]
 Writes benchmarks/results/exp_ablation.json and docs/figures/exp_ablation.png.
 """
 from __future__ import annotations
 
 import time
 
-import _exp_common as C
+import _common as C
 import numpy as np
-
-from rscalib import calibrate_line_delay
-from rscalib.linedelay.spline import DEFAULT_MOTION_PRIOR_Q, PAPER_MOTION_PRIOR_Q
 
 NAME = "exp_ablation"
 D_S = 30e-6
 DURATION_S = 10.0
 VARIANTS = [("A R Aᵀ + prior (default)", True, True), ("A R Aᵀ, no prior", True, False),
-            ("plain R + prior", False, True), ("plain R, no prior", False, False),
-            ("A R Aᵀ + paper's prior Q", True, "paper")]
+            ("plain R + prior", False, True), ("plain R, no prior", False, False)]
 BLUEFOX_D_S = 1650 / 12e6
 REGIMES = ["640x480, d = 30 µs, 30 fps", "752x480 BlueFOX, d = 137.5 µs, 7 fps"]
 
@@ -58,10 +56,7 @@ def main() -> None:
         for label, standardise, prior in VARIANTS:
             t0 = time.perf_counter()
             try:
-                res = calibrate_line_delay(detection.observations, cam, standardise_errors=standardise,
-                                           use_motion_prior=bool(prior),
-                                           motion_prior_q=PAPER_MOTION_PRIOR_Q if prior == "paper"
-                                           else DEFAULT_MOTION_PRIOR_Q)
+                res = C.solve_alone(detection, cam, standardise_errors=standardise, motion_prior=prior)
             except Exception as error:  # noqa: BLE001 — record a failed variant, keep going
                 rows.append({"variant": label, "regime": regime, "seed": seed, "error": repr(error)})
                 print(f"  seed {seed} {label}: FAILED {error!r}", flush=True)

@@ -1,4 +1,5 @@
-"""The real desk video (issue 11): rscalib selfcalib next to the offline structure-from-motion
+"""The real desk video (issue 11): rscalib's self-calibration (`rscalib.self_calibrate`, the front
+door of `rscalib selfcalib`) next to the offline structure-from-motion
 self-calibration a user would otherwise reach for — COLMAP through pycolmap (PyPI), one shared
 SIMPLE_RADIAL camera over every 2nd or 3rd frame, sequential matching, incremental mapping.
 
@@ -7,7 +8,7 @@ Truth: the authors' offline calibration in ../shared/data/real_selfcalib_s3phone
 (docs/formats.md): its principal point minus 0.5 is compared. COLMAP holds the principal point at
 the image centre unless asked to refine it; both are run.
 
-Usage: .venv/bin/python benchmarks/exp_colmap_desk.py [--steps 3,2] [--skip-rscalib]
+Usage: .venv/bin/python experiments/exp_colmap_desk.py [--steps 3,2] [--skip-rscalib]
 Writes benchmarks/results/exp_colmap_desk.json and prints a markdown table (docs/experiments.md).
 """
 from __future__ import annotations
@@ -15,21 +16,18 @@ from __future__ import annotations
 import argparse
 import json
 import resource
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+import _common as C
 import cv2
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import machine_info, write_results  # noqa: E402
+import rscalib
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "real_selfcalib_s3phone"
+DATA = C.REPO.parent / "shared" / "data" / "real_selfcalib_s3phone"
 VIDEO = DATA / "escritorio_traslacion.mp4"
-RESULTS = REPO / "benchmarks" / "results" / "exp_colmap_desk.json"
 TRUTH = {"fx": 525.060, "fy": 524.245, "cx": 308.649, "cy": 236.536}
 PIXEL_SIZE_MM = 0.0070216
 
@@ -90,15 +88,14 @@ def run_colmap(step: int, refine_principal_point: bool, work: Path) -> dict:
 
 
 def run_rscalib(work: Path) -> dict:
-    out = work / "rscalib"
+    """`rscalib selfcalib VIDEO --pixel-size-mm ...` as its front door, with its files; run first, so
+    this process's peak memory is rscalib's (COLMAP has not run yet)."""
     started = time.perf_counter()
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    code = subprocess.call([str(Path(sys.executable).parent / "rscalib"), "selfcalib", str(VIDEO), "--pixel-size-mm",
-                            str(PIXEL_SIZE_MM), "--out", str(out), "--quiet"])
+    run = rscalib.self_calibrate(VIDEO, rscalib.SelfCalibOptions(pixel_size_mm=PIXEL_SIZE_MM))
+    result = run.write(work / "rscalib")
     seconds = time.perf_counter() - started
-    peak_mb = max(before, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss) / 1024
-    result = json.loads((out / "result.json").read_text())
-    return {"exit": code, "seconds": seconds, "peak_rss_mb": peak_mb, "result": result}
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return {"exit": run.verdict.exit_code, "seconds": seconds, "peak_rss_mb": peak_mb, "result": result}
 
 
 def main() -> None:
@@ -108,7 +105,6 @@ def main() -> None:
     args = parser.parse_args()
     if not VIDEO.is_file():
         sys.exit(f"{VIDEO} not found (../shared/data beside the repository)")
-    info = machine_info()
     rows = []
     with tempfile.TemporaryDirectory(prefix="rscalib_colmap_") as tmp:
         work = Path(tmp)
@@ -146,7 +142,7 @@ def main() -> None:
     if ours is not None:
         summary["rscalib"]["result"] = {k: v for k, v in ours["result"].items() if k != "history"}
     settings = {"steps": args.steps, "command": " ".join([".venv/bin/python"] + sys.argv), "truth": TRUTH}
-    write_results(RESULTS, "exp_colmap_desk", info, settings, summary, text)
+    C.write_results("exp_colmap_desk", settings, summary, text)
     print(text)
 
 

@@ -4,12 +4,12 @@ Rendered videos (rscalib.sim.target_video.render_video, as `rscalib simulate --f
 640x480, 30 fps, 1 s (30 frames), checkerboard on a background, noise 2 grey levels, supersample 1,
 flicker depth 0.3 with a random phase per seed. For each line delay d, light frequency (1 kHz LED,
 100 Hz mains) and camera (static, hand-held motion) over several seeds, the video goes through
-rscalib.flicker.pipeline.estimate_line_delay_flicker (= `rscalib flicker`); both estimators are recorded
-when they apply (spectrum: >= 2 periods per frame; phase-drift: uses the frame timestamps). With
-motion, the 1 kHz video also goes through the target method (rscalib.linedelay.pipeline.calibrate_video
-= `rscalib linedelay`).
+rscalib.estimate_line_delay_flicker (the front door of `rscalib flicker`; run.result is its
+estimate); both estimators are recorded when they apply (spectrum: >= 2 periods per frame;
+phase-drift: uses the frame timestamps). With motion, the 1 kHz video also goes through the target
+method (rscalib.calibrate_video = `rscalib linedelay`).
 
-Usage: .venv/bin/python benchmarks/exp_flicker.py [--seeds 5] [--quick] [--no-linedelay]
+Usage: .venv/bin/python experiments/exp_flicker.py [--seeds 5] [--quick] [--no-linedelay]
 Writes benchmarks/results/exp_flicker.json and docs/figures/exp_flicker.png; prints a markdown table.
 Videos are rendered into a temporary folder and deleted.
 """
@@ -18,22 +18,17 @@ from __future__ import annotations
 import argparse
 import math
 import shutil
-import sys
 import tempfile
 import time
 from pathlib import Path
 
+import _common as C
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import machine_info, write_results  # noqa: E402
+import rscalib
+from rscalib.sim.target_video import render_video
 
-from rscalib.flicker.pipeline import estimate_line_delay_flicker  # noqa: E402
-from rscalib.sim.target_video import render_video  # noqa: E402
-
-REPO = Path(__file__).resolve().parents[1]
-RESULTS = REPO / "benchmarks" / "results" / "exp_flicker.json"
-FIGURE = REPO / "docs" / "figures" / "exp_flicker.png"
+FIGURE = C.FIGURES / "exp_flicker.png"
 
 LINE_DELAYS_S = (15e-6, 30e-6, 60e-6)   # readout 7.2, 14.4, 28.8 ms of a 33.3 ms frame
 FREQUENCIES_HZ = (1000.0, 100.0)
@@ -42,9 +37,8 @@ RENDER = dict(fps=30.0, size=(640, 480), duration_s=1.0, noise=2.0, supersample=
 
 
 def target_estimate(video, camera_path, target_path) -> dict:
-    from rscalib.linedelay.pipeline import calibrate_video
-
-    result = calibrate_video(video, target_path, camera_path, workers=1, cache=False).result
+    options = rscalib.LineDelayOptions(detection=rscalib.DetectOptions(workers=1, cache=False))
+    result = rscalib.calibrate_video(video, target_path, camera_path, options).result
     return {"line_delay_s": result.line_delay_s, "line_delay_std_s": result.line_delay_std_s,
             "determined": bool(result.determined)}
 
@@ -62,7 +56,7 @@ def run(seeds: int, with_linedelay: bool, work: Path) -> list[dict]:
                                          flicker_phase_rad=phase, progress=False, **RENDER)
                     render_s = time.perf_counter() - started
                     started = time.perf_counter()
-                    run_ = estimate_line_delay_flicker(video.video_path, f)
+                    run_ = rscalib.estimate_line_delay_flicker(video.video_path, f)
                     res = run_.result
                     row = dict(d_true_s=d, frequency_hz=f, motion=motion, seed=seed, flicker_phase_rad=phase,
                                method=res.method, detrend=res.detrend, determined=res.determined,
@@ -173,19 +167,6 @@ def figure(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def _clean(x):
-    """JSON without NaN / inf (null instead)."""
-    if isinstance(x, dict):
-        return {k: _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else None
-    if isinstance(x, (np.integer, np.bool_)):
-        return x.item()
-    return x
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5, help="videos per configuration (5)")
@@ -193,7 +174,6 @@ def main() -> None:
     parser.add_argument("--no-linedelay", action="store_true", help="skip the target-video comparison")
     args = parser.parse_args()
     seeds = 2 if args.quick else args.seeds
-    info = machine_info()
     started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="exp_flicker_") as work:
         rows = run(seeds, not args.no_linedelay, Path(work))
@@ -201,9 +181,8 @@ def main() -> None:
     figure(rows, FIGURE)
     settings = dict(RENDER, line_delays_s=LINE_DELAYS_S, frequencies_hz=FREQUENCIES_HZ, motions=MOTIONS,
                     seeds=seeds, camera="default (f = 500 px), checkerboard 9x6 40 mm",
-                    command=" ".join([".venv/bin/python"] + sys.argv), total_seconds=time.perf_counter() - started)
-    write_results(RESULTS, "exp_flicker", info, _clean(settings), _clean({"per_video": rows, "summary": groups}),
-                  table)
+                    total_seconds=time.perf_counter() - started)
+    C.write_results("exp_flicker", settings, {"per_video": rows, "summary": groups}, table)
     print(f"written {FIGURE} ({FIGURE.stat().st_size / 1024:.0f} kB)\n")
     print(table)
 

@@ -4,30 +4,25 @@ Renderer: rscalib.sim.flicker_light (box-averaged square or sine light, lamp dis
 vignetting, clipping, overlays, noise, JPEG), independent of the estimator's harmonic model. Each
 case draws fresh random parameters from its seed: duty 5-95 %, clipping on/off, 0.3-40 periods per
 frame, 1 or 12 frames, with or without timestamps, top-to-bottom or bottom-to-top readout. Every
-case goes through rscalib.flicker.pipeline.estimate_line_delay_flicker (= `rscalib flicker`).
+case goes through rscalib.estimate_line_delay_flicker (the front door of `rscalib flicker`; run.result is
+its estimate).
 Error: on d when the direction is measured (phase drift) or given, on |d| otherwise.
 
-Usage: .venv/bin/python benchmarks/exp_flicker_grid.py [--cases 56] [--seed0 1300]
+Usage: .venv/bin/python experiments/exp_flicker_grid.py [--cases 56] [--seed0 1300]
 Writes benchmarks/results/exp_flicker_grid.json; prints a markdown table.
 """
 from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 
+import _common as C
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import machine_info, write_results  # noqa: E402
-
-from rscalib.flicker.pipeline import estimate_line_delay_flicker  # noqa: E402
-from rscalib.sim.flicker_light import FlickerLight, FlickerScene, render_flicker_frames  # noqa: E402
-
-REPO = Path(__file__).resolve().parents[1]
-RESULTS = REPO / "benchmarks" / "results" / "exp_flicker_grid.json"
+import rscalib
+from rscalib.sim.flicker_light import FlickerLight, FlickerScene, render_flicker_frames
 
 
 def case(index: int, seed0: int) -> dict:
@@ -59,8 +54,8 @@ def case(index: int, seed0: int) -> dict:
                                           noise=float(rng.uniform(0.5, 3.0)), jpeg_quality=jpeg,
                                           seed=seed0 * 1000 + index)
     started = time.perf_counter()
-    run = estimate_line_delay_flicker(images if frames > 1 else images[0], f,
-                                      timestamps_s=times if timestamps else None)
+    run = rscalib.estimate_line_delay_flicker(images if frames > 1 else images[0], f,
+                                              timestamps_s=times if timestamps else None)
     res = run.result
     seconds = time.perf_counter() - started
     signed = res.direction_determined
@@ -111,9 +106,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", type=int, default=56)
     parser.add_argument("--seed0", type=int, default=1300, help="fresh seeds: change it for new cases")
-    parser.add_argument("--results", type=Path, default=RESULTS, help="where the JSON goes")
+    parser.add_argument("--results", type=Path, default=C.RESULTS / "exp_flicker_grid.json", help="where the JSON goes")
     args = parser.parse_args()
-    info = machine_info()
     started = time.perf_counter()
     rows = []
     for i in range(args.cases):
@@ -125,10 +119,8 @@ def main() -> None:
               f"duty {r['duty']:.2f} clip {r['clipped_fraction']:.2f} {'neg' if r['negative'] else 'pos'} "
               f"{r['lamp']:7s}: {status} [{r['seconds']:.1f}s]", flush=True)
     text, summary = table(rows)
-    settings = dict(cases=args.cases, seed0=args.seed0, command=" ".join([".venv/bin/python"] + sys.argv),
-                    total_seconds=time.perf_counter() - started)
-    clean = [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in r.items()} for r in rows]
-    write_results(args.results, "exp_flicker_grid", info, settings, {"summary": summary, "per_case": clean}, text)
+    settings = dict(cases=args.cases, seed0=args.seed0, total_seconds=time.perf_counter() - started)
+    C.write_results("exp_flicker_grid", settings, {"summary": summary, "per_case": rows}, text, path=args.results)
     print(summary)
     print(text)
 

@@ -3,22 +3,21 @@
 Rendered 640x480, 30 fps, 10 s videos at d = 30 us with a calm-then-wild hand-held motion
 (simulate.calm_then_wild: 0.15 of the default amplitude in the first half, full amplitude in the
 second), 9x6 checkerboard, supersample 2, noise 2 grey levels. For each video:
-`calibrate_line_delay(num_segments=N, adaptive_knots=False)` for N uniform segments over
-~0.5 ... 60 segments per second (log-spaced), and the default adaptive placement. Reported:
+`rscalib.calibrate_video` on its detections with `LineDelayOptions(self_check=False, uniform_knots=N)`
+for N uniform segments over ~0.5 ... 60 segments per second (log-spaced), and with the default
+adaptive placement (`LineDelayOptions(self_check=False)`). Reported:
 line-delay error, J/2N and the trajectory error against the analytic truth (camera-centre mm,
 orientation deg, averaged over each frame's readout).
 
-Usage: .venv/bin/python benchmarks/exp_knots.py [--quick] [--seeds N]
+Usage: .venv/bin/python experiments/exp_knots.py [--quick] [--seeds N]
 Writes benchmarks/results/exp_knots.json and docs/figures/exp_knots.png.
 """
 from __future__ import annotations
 
 import time
 
-import _exp_common as C
+import _common as C
 import numpy as np
-
-from rscalib import calibrate_line_delay
 
 NAME = "exp_knots"
 D_S = 30e-6
@@ -48,10 +47,7 @@ def main() -> None:
         runs = [("uniform", int(max(1, round(r * span)))) for r in SEGMENTS_PER_S] + [("adaptive", None)]
         for sweep_index, (kind, segments) in enumerate(runs):
             t0 = time.perf_counter()
-            if kind == "uniform":
-                res = calibrate_line_delay(obs, cam, num_segments=segments, adaptive_knots=False)
-            else:
-                res = calibrate_line_delay(obs, cam)
+            res = C.solve_alone(detection, cam, uniform_knots=segments)
             timer.add(f"calibrate_{kind}", time.perf_counter() - t0)
             err = C.trajectory_errors(res.trajectory, truth, C.observed_times(res))
             # Calm and wild halves separately: where the adaptive placement should differ.
@@ -95,8 +91,8 @@ def main() -> None:
                 "motion": "HandheldTrajectory with calm_then_wild(duration) amplitude profile (0.15 -> 1.0)",
                 "segments_per_s": SEGMENTS_PER_S.tolist(), "target": "checkerboard 9x6, 40 mm",
                 "noise_grey_levels": 2.0, "supersample": 2,
-                "uniform": "calibrate_line_delay(num_segments=N, adaptive_knots=False)",
-                "adaptive": "calibrate_line_delay defaults"}
+                "uniform": "rscalib.calibrate_video(detections, LineDelayOptions(self_check=False, uniform_knots=N))",
+                "adaptive": "rscalib.calibrate_video(detections, LineDelayOptions(self_check=False))"}
     C.write_results(NAME, settings, rows, table, timer.t)
     figure(rows)
 

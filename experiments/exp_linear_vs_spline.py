@@ -2,35 +2,32 @@
 interpolated linearly / by SLERP (Hedborg et al. 2012), on feature-level simulations.
 
 For several seeds and motion kinds, both models estimate the line delay from the same
-observations (640x480, f = 500 px, 9x6 board, 30 fps, 0.3 px noise, d = 30 us/row, sigma given).
+observations (640x480, f = 500 px, 9x6 board, 30 fps, 0.3 px noise, d = 30 us/row, sigma given):
+`rscalib.calibrate_video(observations, camera=..., options)` with
+`LineDelayOptions(pixel_sigma_px=0.3, self_check=False)` (the spline) and
+`LineDelayOptions(pixel_sigma_px=0.3, baseline="linear")` (the baseline); run.result is each estimate.
 Reported: relative error of d, |d_hat - d| <= 3 sigma_d, camera-centre and rotation error of
 the trajectory at every frame's mid-readout time, J/2N, solve time.
 
-    .venv/bin/python benchmarks/exp_linear_vs_spline.py            # 8 seeds, ~5 min on 2 cores
-    .venv/bin/python benchmarks/exp_linear_vs_spline.py --seeds 2  # quick look
+    .venv/bin/python experiments/exp_linear_vs_spline.py            # 8 seeds, ~5 min on 2 cores
+    .venv/bin/python experiments/exp_linear_vs_spline.py --seeds 2  # quick look
 
 Writes benchmarks/results/exp_linear_vs_spline.json and docs/figures/exp_linear_vs_spline.png.
 """
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
+import _common as C
+import matplotlib
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import matplotlib  # noqa: E402
-from _common import machine_info, write_results  # noqa: E402
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from rscalib import _core  # noqa: E402
-from rscalib._core import CameraModel  # noqa: E402
-from rscalib.linedelay.linear import calibrate_line_delay_linear  # noqa: E402
-from rscalib.linedelay.spline import calibrate_line_delay  # noqa: E402
+import rscalib  # noqa: E402
 from rscalib.sim.target_observations import (  # noqa: E402
     HandheldTrajectory,
     SimCamera,
@@ -40,7 +37,6 @@ from rscalib.sim.target_observations import (  # noqa: E402
     standoff_distance_m,
 )
 
-ROOT = Path(__file__).resolve().parent.parent
 D_TRUE_S = 30e-6
 NOISE_PX = 0.3
 FPS = 30.0
@@ -81,7 +77,7 @@ def run_one(motion: str, seed: int, duration_s: float) -> list[dict]:
         rng = np.random.default_rng([0x11AE, seed])
         keep = rng.uniform(size=obs.num_frames) >= drop
         obs = obs.subset_frames(keep)
-    camera = CameraModel(SIM_CAMERA.model, SIM_CAMERA.params, SIM_CAMERA.width, SIM_CAMERA.height)
+    camera = rscalib.CameraModel(SIM_CAMERA.model, SIM_CAMERA.params, SIM_CAMERA.width, SIM_CAMERA.height)
     # Truth at mid-readout of every video frame inside the sequence (lost frames included).
     t_eval = np.arange(int(duration_s * FPS) - 1) / FPS + 0.5 * D_TRUE_S * SIM_CAMERA.height
     truth_r, truth_p = trajectory.pose_cw(t_eval)
@@ -89,11 +85,13 @@ def run_one(motion: str, seed: int, duration_s: float) -> list[dict]:
     for model in ("spline", "linear"):
         started = time.perf_counter()
         if model == "spline":
-            result = calibrate_line_delay(obs, camera, pixel_sigma=NOISE_PX)
+            options = rscalib.LineDelayOptions(pixel_sigma_px=NOISE_PX, self_check=False)
+            result = rscalib.calibrate_video(obs, camera=camera, options=options).result
             t = np.clip(t_eval, result.trajectory.t_begin, result.trajectory.t_end)
-            rotations, translations = _core.poses_at(result.trajectory, t)
+            rotations, translations = rscalib.poses_at(result.trajectory, t)
         else:
-            result = calibrate_line_delay_linear(obs, camera, pixel_sigma=NOISE_PX)
+            options = rscalib.LineDelayOptions(pixel_sigma_px=NOISE_PX, baseline="linear")
+            result = rscalib.calibrate_video(obs, camera=camera, options=options).result
             rotations, translations = result.pose_at(t_eval)
         elapsed = time.perf_counter() - started
         centre_mm, angle_deg, no_pose = pose_errors(rotations, translations, truth_r, truth_p)
@@ -160,8 +158,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=8)
     parser.add_argument("--duration", type=float, default=5.0, help="seconds of video per run (5)")
+    parser.add_argument("--out", type=Path, default=C.RESULTS / "exp_linear_vs_spline.json", help="the results file")
+    parser.add_argument("--figure", type=Path, default=C.FIGURES / "exp_linear_vs_spline.png")
     args = parser.parse_args()
-    info = machine_info()
     rows = []
     for motion in MOTIONS:
         for seed in range(args.seeds):
@@ -177,12 +176,11 @@ def main() -> None:
                 "noise_px": NOISE_PX, "camera": "640x480 pinhole-radtan f=500 k1=-0.1 k2=0.05", "target": "9x6, 4 cm",
                 "pixel_sigma": "given (0.3)", "motions": list(MOTIONS),
                 "trajectory_error": "mean over every video frame's mid-readout time (lost frames included)",
-                "command": "python benchmarks/exp_linear_vs_spline.py" + ("" if args.seeds == 8 else f" --seeds {args.seeds}")
+                "command": "python experiments/exp_linear_vs_spline.py" + ("" if args.seeds == 8 else f" --seeds {args.seeds}")
                 + ("" if args.duration == 5.0 else f" --duration {args.duration}")}
-    write_results(ROOT / "benchmarks/results/exp_linear_vs_spline.json", "exp_linear_vs_spline", info, settings,
-                  rows, text)
-    figure(rows, ROOT / "docs/figures/exp_linear_vs_spline.png")
-    print(f"written {ROOT / 'docs/figures/exp_linear_vs_spline.png'}")
+    C.write_results("exp_linear_vs_spline", settings, rows, text, path=args.out)
+    figure(rows, args.figure)
+    print(f"written {args.figure}")
 
 
 if __name__ == "__main__":

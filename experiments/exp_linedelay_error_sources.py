@@ -1,9 +1,10 @@
 """Where the line-delay error on realistic renders comes from (issue 12; docs/experiments.md
 "Where the realistic-render error comes from").
 
-For each video of bench_linedelay_realistic.py (rendered with --render; its truth.json holds the exact
-rolling-shutter projection of every corner at the middle of each row's exposure) the same frames are
-solved (calibrate_line_delay, no self-check) four times:
+For each video of benchmarks/bench_linedelay_realistic.py (rendered with --render; its truth.json
+holds the exact rolling-shutter projection of every corner at the middle of each row's exposure) the
+same frames are solved (`rscalib.calibrate_video` on rscalib.Observations,
+`LineDelayOptions(self_check=False)`) four times:
 
 - `detected`: the corners the detector found (what `rscalib linedelay` uses);
 - `exact`:    the exact mid-exposure projections of the same corners, at the recorded frame times;
@@ -14,7 +15,7 @@ solved (calibrate_line_delay, no self-check) four times:
 `exact+white` shows the error the solver's own sigma describes; `detected` against `exact+white` is
 what the detector's error adds beyond white noise of the same size.
 
-    .venv/bin/python benchmarks/exp_linedelay_error_sources.py --videos /tmp/rscalib_bench_realistic_long
+    .venv/bin/python experiments/exp_linedelay_error_sources.py --videos /tmp/rscalib_bench_realistic_long
 """
 from __future__ import annotations
 
@@ -22,22 +23,21 @@ import argparse
 import json
 from pathlib import Path
 
+import _common as C
 import numpy as np
-from _common import machine_info, write_results
 
-from rscalib.io.cameras import load_camera
-from rscalib.linedelay.pipeline import detect
-from rscalib.linedelay.spline import calibrate_line_delay
-from rscalib.observations import Observations
+import rscalib
 
+SOLVE_ALONE = rscalib.LineDelayOptions(self_check=False)
 VARIANTS = ("detected", "exact", "exact+capture", "exact+white")
 
 
 def corner_sets(folder: Path):
     """(camera, detected Observations, {variant: Observations}, truth) of one rendered video."""
     truth = json.loads((folder / "truth.json").read_text())
-    camera = load_camera(folder / "camera.yaml").camera
-    obs = detect(folder / "frames", folder / "target.yaml", camera, progress=False).observations
+    camera = rscalib.load_camera(folder / "camera.yaml").camera
+    detection = rscalib.detect_video(folder / "frames", rscalib.load_target(folder / "target.yaml"), progress=False)
+    obs = detection.observations
     recorded = np.asarray(truth["recorded_times_s"])
     captured = np.asarray(truth["capture_times_s"])
     frame = np.array([int(np.argmin(np.abs(recorded - t))) for t in obs.frame_times_s])
@@ -56,7 +56,7 @@ def corner_sets(folder: Path):
     white = exact[ok] + np.random.default_rng([truth["seed"], 0x57]).normal(0.0, rms_px, exact[ok].shape)
 
     def observations(uv, times):
-        return Observations(times, obs.frame_index[ok], obs.point_id[ok], uv, obs.target_points, obs.image_size)
+        return rscalib.Observations(times, obs.frame_index[ok], obs.point_id[ok], uv, obs.target_points, obs.image_size)
 
     sets = {"detected": observations(obs.uv[ok], obs.frame_times_s),
             "exact": observations(exact[ok], obs.frame_times_s),
@@ -85,7 +85,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--videos", type=Path, default=Path("/tmp/rscalib_bench_realistic_long"))
     parser.add_argument("--out", type=Path,
-                        default=Path(__file__).parent / "results" / "exp_linedelay_error_sources.json")
+                        default=C.RESULTS / "exp_linedelay_error_sources.json")
     args = parser.parse_args()
     rows = []
     for folder in sorted(p for p in args.videos.iterdir() if (p / "truth.json").is_file()):
@@ -96,7 +96,7 @@ def main() -> int:
                "duration_s": truth["duration_s"], "line_delay_us": truth["line_delay_s"] * 1e6,
                "detected_rms_error_px": rms_px}
         for variant, obs in sets.items():
-            result = calibrate_line_delay(obs, camera)
+            result = rscalib.calibrate_video(obs, camera=camera, options=SOLVE_ALONE).result
             d, std = result.line_delay_s, result.line_delay_std_s
             row[variant] = {"d_us": d * 1e6, "std_us": std * 1e6, "segments": result.num_segments,
                             "rel_err": (d - truth["line_delay_s"]) / truth["line_delay_s"],
@@ -106,7 +106,7 @@ def main() -> int:
         rows.append(row)
     table = summarise(rows)
     print(table)
-    write_results(args.out, "exp_linedelay_error_sources", machine_info(), {"videos": str(args.videos)}, rows, table)
+    C.write_results("exp_linedelay_error_sources", {"videos": str(args.videos)}, rows, table, path=args.out)
     return 0
 
 

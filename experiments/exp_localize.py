@@ -1,9 +1,9 @@
 """Paper Fig. 5 (Oth et al. 2013 §5.1): continuous-time RS localisation vs per-frame GS PnP.
 
 Rendered 640x480, 30 fps, 10 s hand-held videos (9x6 checkerboard, supersample 2, noise 2 grey
-levels) at d = 30 and 60 us. `rscalib.localize` with the true d gives the continuous-time RS
-trajectory; its `frame_poses` are the per-frame global-shutter PnP poses (rscalib.linedelay.pnp) it starts
-from — the baseline. Both are compared with the analytic rendered trajectory:
+levels) at d = 30 and 60 us. `rscalib.localize_video` on the detections, with the true d, gives
+the continuous-time RS trajectory (run.result); its `frame_poses` are the per-frame global-shutter
+PnP poses it starts from — the baseline. Both are compared with the analytic rendered trajectory:
 
 - GS PnP, pose placed at the frame timestamp t_i (what a GS pipeline does) and, fairer to it, at
   the frame's mean observation time t_i + mean(v) d (where a GS pose fits the RS image best);
@@ -11,17 +11,17 @@ from — the baseline. Both are compared with the analytic rendered trajectory:
 
 Errors: camera-centre distance (mm) and rotation angle of R_est R_trueᵀ (rad, deg), averaged.
 
-Usage: .venv/bin/python benchmarks/exp_localize.py [--quick] [--seeds N]
+Usage: .venv/bin/python experiments/exp_localize.py [--quick] [--seeds N]
 Writes benchmarks/results/exp_localize.json and docs/figures/exp_localize.png.
 """
 from __future__ import annotations
 
 import time
 
-import _exp_common as C
+import _common as C
 import numpy as np
 
-from rscalib import _core, localize
+import rscalib
 
 NAME = "exp_localize"
 LINE_DELAYS_S = [30e-6, 60e-6]
@@ -35,7 +35,7 @@ def video(d: float, seed: int):
 
 
 def gs_errors(poses, times_s, truth) -> tuple[np.ndarray, np.ndarray]:
-    R_g = np.stack([_core.rotation_vector_to_matrix(v) for v in poses.rotation_vector])
+    R_g = np.stack([rscalib.rotation_vector_to_matrix(v) for v in poses.rotation_vector])
     R_t, p_t = truth.pose_cw(times_s)
     return C.pose_errors(R_g, poses.translation, R_t, p_t)
 
@@ -56,7 +56,7 @@ def main() -> None:
             timer.add("detect", time.perf_counter() - t0)
             truth = C.truth_trajectory(folder)
             t0 = time.perf_counter()
-            res = localize(detection.observations, cam, line_delay_s=d)
+            res = rscalib.localize_video(detection, camera=cam, line_delay_s=d).result
             timer.add("localize", time.perf_counter() - t0)
             obs = res.used_observations
             mean_row = np.bincount(obs.frame_index, weights=obs.uv[:, 1], minlength=obs.num_frames) / \
@@ -65,7 +65,7 @@ def main() -> None:
             t_mid = t_frame + mean_row * d
             gs_p0, gs_r0 = gs_errors(res.frame_poses, t_frame, truth)
             gs_p, gs_r = gs_errors(res.frame_poses, t_mid, truth)
-            R_e, p_e = _core.poses_at(res.trajectory, np.clip(t_mid, res.trajectory.t_begin, res.trajectory.t_end))
+            R_e, p_e = rscalib.poses_at(res.trajectory, np.clip(t_mid, res.trajectory.t_begin, res.trajectory.t_end))
             R_t, p_t = truth.pose_cw(t_mid)
             rs_p, rs_r = C.pose_errors(np.asarray(R_e), np.asarray(p_e), R_t, p_t)
             dense = C.trajectory_errors(res.trajectory, truth, C.observed_times(res))
@@ -104,7 +104,7 @@ def main() -> None:
     timer.add("total", time.perf_counter() - started)
     settings = {"size": [640, 480], "fps": 30.0, "duration_s": DURATION_S, "line_delays_s": LINE_DELAYS_S,
                 "seeds": seeds, "target": "checkerboard 9x6, 40 mm", "noise_grey_levels": 2.0, "supersample": 2,
-                "localize": "rscalib.localize defaults with the true d", "paper_real_data": "GS 189 mm / 0.34 rad, RS 8.34 mm / 0.03 rad"}
+                "localize": "rscalib.localize_video(detections, camera, line_delay_s=true d), LocalizeOptions defaults", "paper_real_data": "GS 189 mm / 0.34 rad, RS 8.34 mm / 0.03 rad"}
     C.write_results(NAME, settings, rows, table, timer.t)
     figure(*example)
 
@@ -117,10 +117,10 @@ def figure(d, seed, folder, res, truth, t_mid) -> None:
     t_dense = np.linspace(res.trajectory.t_begin, res.trajectory.t_end, 3000)
     R_t, p_t = truth.pose_cw(t_dense)
     c_true = -np.einsum("nji,nj->ni", R_t, p_t) * 1e3
-    R_e, p_e = _core.poses_at(res.trajectory, t_dense)
+    R_e, p_e = rscalib.poses_at(res.trajectory, t_dense)
     c_rs = -np.einsum("nji,nj->ni", np.asarray(R_e), np.asarray(p_e)) * 1e3
     poses = res.frame_poses
-    R_g = np.stack([_core.rotation_vector_to_matrix(v) for v in poses.rotation_vector])
+    R_g = np.stack([rscalib.rotation_vector_to_matrix(v) for v in poses.rotation_vector])
     c_gs = -np.einsum("nji,nj->ni", R_g, poses.translation) * 1e3
     fig, axes = plt.subplots(4, 1, figsize=(8, 7.5), sharex=True, constrained_layout=True)
     for k, name in enumerate("xyz"):
@@ -133,7 +133,7 @@ def figure(d, seed, folder, res, truth, t_mid) -> None:
     R_tm, p_tm = truth.pose_cw(t_mid)
     ctm = -np.einsum("nji,nj->ni", R_tm, p_tm) * 1e3
     axes[3].plot(t_mid, np.linalg.norm(c_gs - ctm, axis=1), "b.", ms=3, label="GS PnP")
-    R_e2, p_e2 = _core.poses_at(res.trajectory, np.clip(t_mid, res.trajectory.t_begin, res.trajectory.t_end))
+    R_e2, p_e2 = rscalib.poses_at(res.trajectory, np.clip(t_mid, res.trajectory.t_begin, res.trajectory.t_end))
     c_rs2 = -np.einsum("nji,nj->ni", np.asarray(R_e2), np.asarray(p_e2)) * 1e3
     axes[3].plot(t_mid, np.linalg.norm(c_rs2 - ctm, axis=1), "g.", ms=3, label="RS")
     axes[3].set_yscale("log")

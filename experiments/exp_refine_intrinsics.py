@@ -1,12 +1,14 @@
 """Joint refinement of the intrinsics with the line delay (`rscalib linedelay --refine-intrinsics`,
 docs/formulation.md §14; docs/experiments.md "Joint refinement of the intrinsics").
 
-For each rendered video (`rscalib simulate`, fresh seeds, two resolutions) four runs of the real CLI:
-the true camera file or a deliberately wrong one (f 2 % long, principal point +8 px in u and v), each
-without and with --refine-intrinsics. Writes benchmarks/results/exp_refine_intrinsics.json and prints
-the markdown table of docs/experiments.md.
+For each rendered video (`rscalib simulate`, fresh seeds, two resolutions) four runs of the front
+door of `rscalib linedelay --no-self-check`, `rscalib.calibrate_video(video, target, camera,
+LineDelayOptions(self_check=False, refine_intrinsics=...))`, each writing the command's files
+(run.write): the true camera file or a deliberately wrong one (f 2 % long, principal point +8 px in u
+and v), each without and with the refinement. Writes benchmarks/results/exp_refine_intrinsics.json
+and prints the markdown table of docs/experiments.md.
 
-    .venv/bin/python benchmarks/exp_refine_intrinsics.py [--videos DIR] [--render]
+    .venv/bin/python experiments/exp_refine_intrinsics.py [--videos DIR] [--render]
 """
 from __future__ import annotations
 
@@ -19,6 +21,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+import rscalib
 
 ROOT = Path(__file__).resolve().parents[1]
 VIDEOS = (("640x480", 4101, "30us"), ("640x480", 4102, "20us"), ("640x480", 4103, "45us"),
@@ -37,37 +41,34 @@ def render(folder: Path, size: str, seed: int, delay: str) -> None:
 
 
 def wrong_camera(folder: Path) -> Path:
-    if str(ROOT / "python") not in sys.path:
-        sys.path.append(str(ROOT / "python"))
-    from rscalib import CameraModel
-    from rscalib.io.cameras import load_camera, write_camera
-
-    camera = load_camera(folder / "camera.yaml").camera
+    camera = rscalib.load_camera(folder / "camera.yaml").camera
     p = np.array(camera.params, dtype=np.float64)
     p[:2] *= FOCAL_FACTOR
     p[2:4] += CENTRE_SHIFT_PX
     path = folder / "camera_wrong.yaml"
-    write_camera(CameraModel(camera.model, p, camera.width, camera.height), path)
+    rscalib.write_camera(rscalib.CameraModel(camera.model, p, camera.width, camera.height), path)
     return path
 
 
 def run(folder: Path, camera: Path, refine: bool, out: Path) -> dict:
-    args = ["linedelay", folder / "video.avi", "--target", folder / "target.yaml", "--camera", camera,
-            "--out", out, "--no-self-check", "--quiet"] + (["--refine-intrinsics"] if refine else [])
     if (out / "row.json").exists():  # done before (delete the folder to redo)
         return json.loads((out / "row.json").read_text())
+    options = rscalib.LineDelayOptions(self_check=False, refine_intrinsics=refine)
     started = time.perf_counter()
-    done = subprocess.run(cli(*args), capture_output=True, text=True)
+    done = rscalib.calibrate_video(folder / "video.avi", folder / "target.yaml", camera, options)
+    done.write(out)
     wall = time.perf_counter() - started
-    summary = json.loads((out / "result.json").read_text())
+    result = done.result   # the estimate (also when the verdict claims no number)
     truth = json.loads((folder / "truth.json").read_text())
     true_params = np.array(truth["camera"]["params"], dtype=np.float64)
-    d, std = summary["line_delay_s"], summary["line_delay_std_s"]
-    row = {"video": folder.name, "camera": camera.name, "refine": refine, "exit": done.returncode,
-           "command": "rscalib " + " ".join(str(a) for a in args), "true_line_delay_s": truth["line_delay_s"],
+    d, std = result.line_delay_s, result.line_delay_std_s
+    command = (f"rscalib.calibrate_video({folder.name}/video.avi, target.yaml, {camera.name}, "
+               f"LineDelayOptions(self_check=False, refine_intrinsics={refine}))")
+    row = {"video": folder.name, "camera": camera.name, "refine": refine, "exit": done.verdict.exit_code,
+           "command": command, "true_line_delay_s": truth["line_delay_s"],
            "line_delay_s": d, "line_delay_std_s": std, "z_d": (d - truth["line_delay_s"]) / std,
-           "normalised_cost": summary["normalised_cost"], "wall_s": wall}
-    ki = summary.get("intrinsics")
+           "normalised_cost": result.normalised_cost, "wall_s": wall}
+    ki = result.intrinsics
     if ki:
         for i, name in enumerate(("fx", "fy", "cx", "cy")):
             row[f"{name}_error"] = ki["estimate"][name] - true_params[i]

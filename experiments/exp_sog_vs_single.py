@@ -1,48 +1,50 @@
 """Single EKF vs the Sum-of-Gaussians bank (issue 6, baseline 5; Civera et al. 2009 §VI).
 
-The same rendered textured-room sequences (paper camera, f = 194.06 px) are self-calibrated
-(a) by the paper's 108-Gaussian bank and (b) by one EKF started at a wrong focal length f0 with a
-wide sigma (`rscalib selfcalib --bank single --f0 F0 --f-sigma S`: the same code path, one Gaussian).
-Per run: final f error, whether the truth is inside the 99 % bounds, and the f trace.
+The same rendered textured-room sequences (paper camera, f = 194.06 px; image folders written by
+rscalib.sim.scene_video.render_scene_sequence) are self-calibrated by the front door of
+`rscalib selfcalib`, rscalib.self_calibrate, with its two filter baselines and no restarts:
+(a) the paper's 108-Gaussian bank (`SelfCalibOptions(baseline="filter")`, `--bank filter`) and
+(b) one EKF started at a wrong focal length f0 with a wide sigma (`SelfCalibOptions(baseline="single",
+f0_px=F0, f_sigma_px=S)`, `--bank single --f0 F0 --f-sigma S`: the same code path, one Gaussian).
+Per run: final f error, whether the truth is inside the filter's own 99 % bounds
+(run.result.filter_bounds_99), and the f trace. The recorded results (before issue 29) were made
+with the then default "affine" front end; the front door now runs the method's "tracked" one.
 
-Usage: .venv/bin/python benchmarks/exp_sog_vs_single.py [--sequences 4] [--frames 300] [--quick]
+Usage: .venv/bin/python experiments/exp_sog_vs_single.py [--sequences 4] [--frames 300] [--quick]
 Writes benchmarks/results/exp_sog_vs_single.json and docs/figures/exp_sog_vs_single.png and prints
-a markdown table. Rendered frames are cached in build/exp_videos/scene_<seed>_<frames>.npz.
+a markdown table. Rendered sequences are cached in build/exp_videos/scene_<seed>_<frames>/.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from pathlib import Path
 
+import _common as C
 import numpy as np
-from _common import machine_info, write_results
 
-from rscalib.selfcalib.calibrate import self_calibrate
-from rscalib.sim.scene_video import render_scene_frames
+import rscalib
+from rscalib.sim.scene_video import render_scene_sequence
 
-ROOT = Path(__file__).resolve().parents[1]
-CACHE = ROOT / "build" / "exp_videos"
 F0_SIGMA = [(100.0, 50.0), (150.0, 50.0), (300.0, 75.0), (450.0, 125.0)]
 
 
-def frames_for(seed: int, frames: int):
-    CACHE.mkdir(parents=True, exist_ok=True)
-    path = CACHE / f"scene_{seed}_{frames}.npz"
-    if path.exists():
-        data = np.load(path)
-        return data["times"], data["images"], data["params"]
-    rendered = render_scene_frames(num_frames=frames, seed=seed)
-    params = np.asarray(rendered.camera.params)
-    np.savez_compressed(path, times=rendered.timestamps_s, images=rendered.images, params=params)
-    return rendered.timestamps_s, rendered.images, params
+def sequence_for(seed: int, frames: int) -> tuple[Path, np.ndarray]:
+    """The rendered room walk (an image folder with timestamps.txt, cached) and its true camera."""
+    folder = C.VIDEO_ROOT / f"scene_{seed}_{frames}"
+    if not (folder / "truth.json").is_file():
+        render_scene_sequence(folder, num_frames=frames, seed=seed)
+    truth = json.loads((folder / "truth.json").read_text())
+    return folder, np.asarray(truth["camera"]["params"], dtype=np.float64)
 
 
-def run_one(times, images, grid) -> dict:
+def run_one(folder: Path, options) -> dict:
     started = time.perf_counter()
-    result = self_calibrate(zip(times, images), (images.shape[2], images.shape[1]), grid=grid)
-    return dict(f=float(result.mean[0]), f_bounds_99=result.bounds_99[0].tolist(),
-                mean=result.mean.tolist(), bounds_99=result.bounds_99.tolist(),
+    result = rscalib.self_calibrate(folder, options).result
+    bounds = result.filter_bounds_99   # the bank's own 99 % bounds
+    return dict(f=float(result.mean[0]), f_bounds_99=bounds[0].tolist(),
+                mean=result.mean.tolist(), bounds_99=bounds.tolist(),
                 f_trace=result.history.mean[:, 0].tolist(), f_lo_trace=result.history.bounds_99[:, 0, 0].tolist(),
                 f_hi_trace=result.history.bounds_99[:, 0, 1].tolist(), gaussians_left=result.gaussians_left,
                 collapse_frame=result.collapse_frame, seconds=time.perf_counter() - started)
@@ -53,22 +55,21 @@ def main() -> None:
     parser.add_argument("--sequences", type=int, default=4)
     parser.add_argument("--frames", type=int, default=300)
     parser.add_argument("--quick", action="store_true", help="2 sequences of 150 frames")
-    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "exp_sog_vs_single.json")
-    parser.add_argument("--figure", type=Path, default=ROOT / "docs" / "figures" / "exp_sog_vs_single.png")
+    parser.add_argument("--out", type=Path, default=C.RESULTS / "exp_sog_vs_single.json")
+    parser.add_argument("--figure", type=Path, default=C.FIGURES / "exp_sog_vs_single.png")
     args = parser.parse_args()
     if args.quick:
         args.sequences, args.frames = 2, 150
-    info = machine_info()
     rows = []
     for s in range(args.sequences):
         seed = 100 + s
-        times, images, truth = frames_for(seed, args.frames)
-        configs = [("SOG bank (108)", None)]
+        folder, truth = sequence_for(seed, args.frames)
+        configs = [("SOG bank (108)", rscalib.SelfCalibOptions(baseline="filter", restarts=False))]
         configs += [(f"single EKF f0={f0:.0f}±{sd:.0f}",
-                     {"f_range": (f0 - 2 * sd, f0 + 2 * sd), "f_count": 1, "k1_count": 1, "k2_count": 1})
+                     rscalib.SelfCalibOptions(baseline="single", f0_px=f0, f_sigma_px=sd, restarts=False))
                     for f0, sd in F0_SIGMA]
-        for name, grid in configs:
-            r = run_one(times, images, grid)
+        for name, options in configs:
+            r = run_one(folder, options)
             lo, hi = r["f_bounds_99"]
             inside = [bool(b[0] <= t <= b[1]) for b, t in zip(r["bounds_99"], truth)]
             r.update(seed=seed, config=name, truth=truth.tolist(), f_error_rel=(r["f"] - truth[0]) / truth[0],
@@ -88,10 +89,12 @@ def main() -> None:
     table = "\n".join(lines)
     print("\n" + table)
     plot(rows, names, args.figure)
-    write_results(args.out, "exp_sog_vs_single", info,
-                  {"sequences": args.sequences, "frames": args.frames, "single_f0_sigma": F0_SIGMA},
-                  [{k: v for k, v in r.items() if not k.endswith("trace")} for r in rows]
-                  + [{"seed": r["seed"], "config": r["config"], "f_trace": r["f_trace"]} for r in rows], table)
+    C.write_results("exp_sog_vs_single",
+                    {"sequences": args.sequences, "frames": args.frames, "single_f0_sigma": F0_SIGMA,
+                     "front_end": rscalib.SelfCalibOptions().front_end.subpixel, "restarts": False},
+                    [{k: v for k, v in r.items() if not k.endswith("trace")} for r in rows]
+                    + [{"seed": r["seed"], "config": r["config"], "f_trace": r["f_trace"]} for r in rows], table,
+                    path=args.out)
 
 
 def plot(rows, names, path: Path) -> None:

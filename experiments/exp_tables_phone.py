@@ -12,17 +12,15 @@ Cost control (2 shared cores): 640x480 videos are 10 s at supersample 2; 1080p v
 supersample 1 (each output pixel one sample at its own row time, texture box-filtered over the
 pixel footprint) -- the paper's videos were 50-60 s, so our σ_d are larger by ~sqrt(10).
 
-Usage: .venv/bin/python benchmarks/exp_tables_phone.py [--quick] [--seeds N]
+Usage: .venv/bin/python experiments/exp_tables_phone.py [--quick] [--seeds N]
 Writes benchmarks/results/exp_tables_phone.json and docs/figures/exp_tables_phone.png.
 """
 from __future__ import annotations
 
 import time
 
-import _exp_common as C
+import _common as C
 import numpy as np
-
-from rscalib import calibrate_line_delay
 
 NAME = "exp_tables_phone"
 # name, size, d, duration, supersample, paper d, paper sigma, paper N
@@ -48,7 +46,7 @@ def main() -> None:
             detection, cam = C.detect(folder)
             timer.add("detect", time.perf_counter() - t0)
             t0 = time.perf_counter()
-            res = calibrate_line_delay(detection.observations, cam)
+            res = C.solve_alone(detection, cam)
             timer.add("calibrate", time.perf_counter() - t0)
             rows.append(C.summary_row(res, d) | {"phone": name, "size": list(size), "seed": seed, "duration_s": duration,
                                                 "supersample": ss, "frames_total": detection.frames_total,
@@ -85,7 +83,8 @@ def main() -> None:
                 "camera": "render.default_camera(size)", "noise_grey_levels": 2.0, "exposure_s": 0.0,
                 "seeds": seeds, "phones": [{"name": p[0], "size": list(p[1]), "line_delay_s": p[2], "duration_s": p[3],
                                             "supersample": p[4]} for p in PHONES],
-                "calibration": "calibrate_line_delay defaults (as `rscalib linedelay`)"}
+                "calibration": "rscalib.calibrate_video(detections, LineDelayOptions(self_check=False)) "
+                               "(as `rscalib linedelay --no-self-check`)"}
     C.write_results(NAME, settings, rows, table, timer.t, per_setting=aggs)
     figure(rows)
 

@@ -1,6 +1,6 @@
 """Figures of docs/capture.md for the flicker and self-calibration sections, made by the renderers.
 
-    .venv/bin/python benchmarks/make_capture_figures.py      # writes docs/capture/{flicker,selfcalib}.png
+    .venv/bin/python experiments/make_capture_figures.py      # writes docs/capture/{flicker,selfcalib}.png
 """
 from pathlib import Path
 
