@@ -2,9 +2,10 @@
 
 A feature detected with unit variance (R = I px²) has, in a rolling-shutter camera, an error
 covariance A R Aᵀ with A = I − d [[0, u̇], [0, v̇]] (docs/formulation.md §4: the matrix the solver
-whitens with; tests/python/core/test_rs_cost.py checks the C++ core's against this form). The image velocity (u̇, v̇) of each feature comes from projecting, with the
-camera model, a point at depth Z while the camera translates along its x, y or z axis with speed
-−V (red), 0 (green) or +V (blue); the black circle is R itself. d = 137.5 us (the paper's
+whitens with; tests/python/core/test_rs_cost.py checks the C++ core's against this form). The
+image velocity (u̇, v̇) of each feature comes from projecting, with the camera model, a point at
+depth Z while the camera translates along its x, y or z axis with speed −V (red), 0 (green) or +V
+(blue); the black circle is R itself. d = 137.5 us (the paper's
 12 MHz BlueFOX setting), V = 3.5 m/s (exaggerated, as the paper's figure), Z = 0.5 m, 640x480 default camera (f = 500 px, k1 = −0.1).
 Ellipses are drawn at ELLIPSE_SCALE px per px of standard deviation (exaggerated).
 

@@ -5,7 +5,8 @@ d = 24.12 us; Galaxy S3 1920x1080 d = 30.25 us (its readout, 32.7 ms, nearly fil
 frame). Target: the symmetric circle grid the paper recommends for phones (rscalib's built-in
 `circlegrid`, 7x5 circles, 40 mm spacing, 10 mm radius; at the default stand-off it spans half
 the image, i.e. circles of ~13 px radius at 640x480 and ~40 px at 1080p). Camera: the project's
-default (f = 500 px x width/640, k1 = -0.1, k2 = 0.05). No motion blur (the paper's phones had
+default (f = 500 px x width/640, k1 = -0.1, k2 = 0.05). The solve: `rscalib.calibrate_video` on
+the detections with `LineDelayOptions(self_check=False)`. No motion blur (the paper's phones had
 long exposures; see exp_tables_phone in the report). Hand-held motion, one seed per video.
 
 Cost control (2 shared cores): 640x480 videos are 10 s at supersample 2; 1080p videos are 5 s at
