@@ -35,7 +35,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.append(str(REPO))
 import rscalib  # noqa: E402
-from benchmarks._common import RESULTS, jsonable, machine_info  # noqa: E402,F401  (re-exported)
+from benchmarks._common import RESULTS, machine_info  # noqa: E402
 from benchmarks._common import write_results as write_results_file  # noqa: E402
 
 VIDEO_ROOT = REPO / "build" / "exp_videos"
