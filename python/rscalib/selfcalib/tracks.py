@@ -16,7 +16,8 @@ what is being estimated):
   keyframe the warp is refined by inverse-compositional Lucas-Kanade (Baker & Matthews 2004) against
   that first view, with gain and bias normalised (auto-exposure), for all tracks at once. So the
   error does not add up from frame to frame: between keyframes a track carries the KLT error of a
-  few frames only. A track whose first view no longer matches is re-anchored at its KLT position.
+  few frames only. A track whose first view no longer matches ends there (re-anchoring it at its
+  KLT position instead keeps that position's error for the rest of the track: measured, §22).
 - **New corners** (``cv2.goodFeaturesToTrack``) where tracks are missing, away from live tracks,
   spread over a grid of cells.
 - **Re-identification**: a track that is lost (left the view, or failed the KLT check) keeps its
@@ -45,8 +46,8 @@ import numpy as np
 from .._progress import Progress, ProgressArg
 from ..errors import InputError
 
-__all__ = ["KeyframeObservations", "TrackOptions", "TrackSet", "FeatureTracker", "geometric_inliers",
-           "image_velocities", "track_features"]
+__all__ = ["KeyframeObservations", "TrackOptions", "TrackSet", "FeatureTracker", "fit_two_view_model",
+           "geometric_inliers", "image_velocities", "track_features", "two_view_distance"]
 
 _REFERENCE_WIDTH = 640.0   # TrackOptions' pixel sizes are for 640x480; scaled with the width
 
@@ -71,6 +72,8 @@ class TrackOptions:
     klt_iterations: int = 10
     klt_epsilon_px: float = 0.03
     fb_max_px: float = 0.5             # forward-backward check (not scaled: LK's precision is in px)
+    klt_gain: bool = True              # scale the previous frame to the current one's brightness first:
+    #                                    LK is not gain-invariant; auto-exposure steps biased it by ~2 px
     # --- geometric verification
     ransac_px: float = 1.0             # frame pair: epipolar / transfer threshold
     keyframe_ransac_px: float = 1.5    # keyframe pair (after anchoring: a longer baseline)
@@ -84,10 +87,13 @@ class TrackOptions:
     keyframe_min_survival: float = 0.8      # ... or when fewer of the last keyframe's tracks are left
     # --- anchoring (inverse-compositional affine Lucas-Kanade against each track's first view)
     anchor: bool = True
-    anchor_half_px: int = 7            # 15x15 first view (sqrt-scaled: 11x11 at 320x240)
+    anchor_half_px: int = 9            # 19x19 first view (sqrt-scaled: 13x13 at 320x240; 11x11 there
+    #                                    gave 0.21 px RMS, 15x15 0.16, 21x21 more at room creases)
     anchor_iterations: int = 4         # started at KLT's position and the last warp: 3-4 suffice
     anchor_min_zncc: float = 0.8       # below: the first view no longer matches (re-anchor)
-    anchor_max_shift_px: float = 1.0   # anchored vs KLT position: KLT drifts < 0.3 px in a few frames
+    anchor_max_shift_px: float = 3.0   # anchored vs KLT position (KLT can slip ~2 px in an exposure step)
+    on_anchor_failure: str = "end"     # "end" the track, or "reanchor" (a new first view at KLT's
+    #                                    position: the track goes on, with that position's error kept)
     anchor_max_scale: float = 1.6      # warp's singular values beyond [1/this, this]: re-anchor
     border_px: int = 2                 # tracks keep their patch this far inside the image
     # --- re-identification
@@ -185,19 +191,32 @@ class TrackSet:
 # Geometry and velocities
 
 
-_RANSAC_METHODS = {"ransac": (cv2.FM_RANSAC, cv2.RANSAC), "magsac": (cv2.USAC_MAGSAC, cv2.USAC_MAGSAC)}
+_RANSAC_METHODS = {"ransac": (cv2.FM_RANSAC, cv2.RHO), "magsac": (cv2.USAC_MAGSAC, cv2.USAC_MAGSAC)}
 
 
 def geometric_inliers(uv0: np.ndarray, uv1: np.ndarray, threshold_px: float, homography_share: float = 0.9,
                       homography_px_factor: float = 2.0, min_points: int = 15, method: str = "ransac"
                       ) -> np.ndarray:
-    """Which correspondences ``uv0[i] <-> uv1[i]`` agree with one rigid scene: inliers of a USAC
-    MAGSAC fundamental matrix at ``threshold_px``; but when a homography (at the same threshold)
-    explains at least ``homography_share`` of those inliers, the views are (nearly) related by a
-    homography — a plane, or a rotation — where the fundamental matrix is not determined and can
-    bend to fit a moving patch, so the inliers of the homography at ``homography_px_factor`` times
-    the threshold are returned instead. Fewer than ``min_points`` correspondences: all kept.
-    ``method``: "ransac" (OpenCV's classic RANSAC) or "magsac" (USAC MAGSAC++: ~10x slower here)."""
+    """Which correspondences ``uv0[i] <-> uv1[i]`` agree with one rigid scene: inliers of a RANSAC
+    fundamental matrix (refitted on its inliers) at ``threshold_px`` (Sampson distance); but when a
+    homography explains at least ``homography_share`` of those inliers, the views are (nearly)
+    related by a homography — a plane, or a rotation — where the fundamental matrix is not
+    determined and can bend to fit a moving patch, so the inliers of the homography at
+    ``homography_px_factor`` times the threshold are returned instead. Fewer than ``min_points``
+    correspondences: all kept. ``method``: "ransac" (OpenCV's RANSAC for F, its PROSAC-based RHO for
+    H) or "magsac" (USAC MAGSAC++ for both: ~10x slower here)."""
+    uv0 = np.asarray(uv0, np.float64).reshape(-1, 2)
+    uv1 = np.asarray(uv1, np.float64).reshape(-1, 2)
+    model = fit_two_view_model(uv0, uv1, threshold_px, homography_share, min_points, method)
+    if model is None:
+        return np.ones(len(uv0), bool)
+    return two_view_distance(model, uv0, uv1) <= threshold_px * (homography_px_factor if model[0] == "H" else 1.0)
+
+
+def fit_two_view_model(uv0: np.ndarray, uv1: np.ndarray, threshold_px: float, homography_share: float = 0.9,
+                       min_points: int = 15, method: str = "ransac") -> Optional[tuple[str, np.ndarray]]:
+    """("F", F) or ("H", H) as :func:`geometric_inliers` chooses them; None when it cannot tell
+    (fewer than ``min_points`` correspondences, or no model found)."""
     if method not in _RANSAC_METHODS:
         raise InputError(f"unknown RANSAC method {method!r} ({', '.join(_RANSAC_METHODS)})")
     method_f, method_h = _RANSAC_METHODS[method]
@@ -205,28 +224,46 @@ def geometric_inliers(uv0: np.ndarray, uv1: np.ndarray, threshold_px: float, hom
     uv1 = np.asarray(uv1, np.float64).reshape(-1, 2)
     n = len(uv0)
     if n < max(min_points, 8):
-        return np.ones(n, bool)
+        return None
     with np.errstate(all="ignore"):
         try:
             F, mask_f = cv2.findFundamentalMat(uv0, uv1, method_f, threshold_px, 0.999, 1000)
             H, mask_h = cv2.findHomography(uv0, uv1, method_h, threshold_px, maxIters=1000, confidence=0.999)
         except cv2.error:
-            return np.ones(n, bool)
-    inliers_f = np.zeros(n, bool)
+            return None
+    count_f = 0
     if F is not None and mask_f is not None and F.shape == (3, 3):
         inliers_f = mask_f.ravel().astype(bool)
         if inliers_f.sum() >= 8:   # RANSAC's F comes from a minimal sample: refit on its inliers
             refit, _ = cv2.findFundamentalMat(uv0[inliers_f], uv1[inliers_f], cv2.FM_8POINT)
             if refit is not None and refit.shape == (3, 3):
                 F = refit
-        inliers_f = _sampson_px(F, uv0, uv1) <= threshold_px
-    if H is None:
-        return inliers_f if inliers_f.any() else np.ones(n, bool)
-    inliers_h = mask_h.ravel().astype(bool)
-    if F is None or inliers_h.sum() >= homography_share * inliers_f.sum():
-        mapped = cv2.perspectiveTransform(uv0.reshape(-1, 1, 2), H).reshape(-1, 2)
-        return np.linalg.norm(mapped - uv1, axis=1) <= homography_px_factor * threshold_px
-    return inliers_f
+        count_f = int(np.sum(_sampson_px(F, uv0, uv1) <= threshold_px))
+    else:
+        F = None
+    if H is None or H.shape != (3, 3):
+        return ("F", F) if F is not None else None
+    if mask_h.sum() >= 4:          # likewise: least squares on the inliers
+        refit, _ = cv2.findHomography(uv0[mask_h.ravel() > 0], uv1[mask_h.ravel() > 0], 0)
+        if refit is not None and refit.shape == (3, 3):
+            H = refit
+    count_h = int(np.sum(two_view_distance(("H", H), uv0, uv1) <= threshold_px))
+    if F is None or count_h >= homography_share * count_f:
+        return ("H", H)
+    return ("F", F)
+
+
+def two_view_distance(model: tuple[str, np.ndarray], uv0: np.ndarray, uv1: np.ndarray) -> np.ndarray:
+    """Distances (px) of correspondences from a two-view model: Sampson for F, transfer for H."""
+    kind, M = model
+    uv0 = np.asarray(uv0, np.float64).reshape(-1, 2)
+    uv1 = np.asarray(uv1, np.float64).reshape(-1, 2)
+    if kind == "F":
+        return _sampson_px(M, uv0, uv1)
+    with np.errstate(all="ignore"):
+        mapped = cv2.perspectiveTransform(uv0.reshape(-1, 1, 2), M).reshape(-1, 2)
+    d = np.linalg.norm(mapped - uv1, axis=1)
+    return np.where(np.isfinite(d), d, np.inf)
 
 
 def _sampson_px(F: np.ndarray, uv0: np.ndarray, uv1: np.ndarray) -> np.ndarray:
@@ -423,6 +460,8 @@ class FeatureTracker:
         o = self.options
         if o.target_tracks < 1 or o.grid_cols < 1 or o.grid_rows < 1 or o.keyframe_max_gap_frames < 1:
             raise InputError("target_tracks, grid_cols, grid_rows and keyframe_max_gap_frames must be positive")
+        if o.on_anchor_failure not in ("end", "reanchor"):
+            raise InputError(f"on_anchor_failure must be 'end' or 'reanchor', not {o.on_anchor_failure!r}")
         self._anchors = _Anchors(o.anchor_half_px)
         self._margin = o.anchor_half_px + o.border_px + 1
         self._orb = cv2.ORB_create(nfeatures=1, nlevels=1, edgeThreshold=16, patchSize=31)
@@ -585,9 +624,14 @@ class FeatureTracker:
     def _track(self, image: np.ndarray) -> None:
         """KLT from the previous frame with the forward-backward check, then the frame pair's RANSAC."""
         o = self.options
+        prev = self._prev
+        if o.klt_gain:    # a global gain from the frames' mean levels (auto-exposure is global)
+            gain = float(np.mean(image)) / max(float(np.mean(prev)), 1.0)
+            if abs(gain - 1.0) > 0.005:
+                prev = cv2.convertScaleAbs(prev, alpha=gain)
         p0 = self._uv.astype(np.float32).reshape(-1, 1, 2)
-        p1, st1, _ = cv2.calcOpticalFlowPyrLK(self._prev, image, p0, None, **self._klt)
-        back, st2, _ = cv2.calcOpticalFlowPyrLK(image, self._prev, p1, None, **self._klt)
+        p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev, image, p0, None, **self._klt)
+        back, st2, _ = cv2.calcOpticalFlowPyrLK(image, prev, p1, None, **self._klt)
         p1, back = p1.reshape(-1, 2).astype(np.float64), back.reshape(-1, 2).astype(np.float64)
         ok = (st1.ravel() == 1) & (st2.ravel() == 1) & np.all(np.isfinite(p1), axis=1)
         ok &= np.linalg.norm(back - self._uv, axis=1) <= o.fb_max_px
@@ -637,7 +681,9 @@ class FeatureTracker:
         bad = np.flatnonzero(~good)
         self.stats["anchored"] += int(good.sum())
         self.stats["anchor_failed"] += len(bad)
-        if len(bad):   # the first view no longer matches: take a new one here, at KLT's position
+        if len(bad) and o.on_anchor_failure == "end":     # the first view no longer matches
+            self._keep(good, release=bad)
+        elif len(bad):    # take a new first view here, at KLT's position
             new_warp = _translation_warps(self._uv[bad])
             self._views.put(self._slot[bad], self._anchors.make(image_f, new_warp))
             self._warp[bad] = new_warp
@@ -732,17 +778,15 @@ class FeatureTracker:
         pool = self._pool
         used = np.zeros(len(corners), bool)
         query = np.flatnonzero(has_desc)
-        rows = np.argwhere(pool["has_desc"])           # (pool index, 0 birth / 1 last seen)
-        if len(query) == 0 or len(rows) < 2:
-            return used
-        train = pool["desc"][rows[:, 0], rows[:, 1]]
-        distance = _hamming(desc[query], train)        # (Q, R)
-        # per corner and lost track: the better of its two descriptors
         n_pool = len(pool["ids"])
-        best = np.full((len(query), n_pool), 10 ** 6, np.int64)
-        np.minimum.at(best.T, rows[:, 0], distance.T)
-        if n_pool < 2:
+        if len(query) == 0 or n_pool < 2:
             return used
+        # per corner and lost track: the nearer of its two descriptors (at birth, where last seen)
+        best = np.full((len(query), n_pool), 10 ** 6, np.int64)
+        for which in (0, 1):
+            have = np.flatnonzero(pool["has_desc"][:, which])
+            if len(have):
+                best[:, have] = np.minimum(best[:, have], _hamming(desc[query], pool["desc"][have, which]))
         part = np.argpartition(best, 1, axis=1)[:, :2]
         d_sorted = np.take_along_axis(best, part, axis=1)
         first = np.argmin(d_sorted, axis=1)
@@ -783,9 +827,10 @@ class FeatureTracker:
         return used
 
     def _reid_geometry(self, uv_now: np.ndarray, lost_ids: np.ndarray) -> np.ndarray:
-        """RANSAC between a recent keyframe that saw the lost tracks and the current frame, over the
-        candidates and the live tracks that keyframe also saw; rounds of the keyframe seeing most of
-        the remaining candidates. Candidates that cannot be checked (too few correspondences) fail."""
+        """Each candidate (lost track -> corner now) against the two-view model (RANSAC) fitted to the
+        live tracks seen both in a recent keyframe that saw the lost track and now; rounds of the
+        keyframe seeing most of the remaining candidates. Candidates that cannot be checked (fewer
+        than min_verify_points such live tracks: the view left that keyframe's scene) fail."""
         o = self.options
         ok = np.zeros(len(lost_ids), bool)
         pending = np.ones(len(lost_ids), bool)
@@ -794,23 +839,25 @@ class FeatureTracker:
             if not pending.any() or not frames:
                 break
             seen = [np.isin(lost_ids, self._kf_index[f][0]) & pending for f in frames]
-            counts = [int(s.sum()) for s in seen]
+            support = [int(np.isin(self._kf_index[f][0], self._ids).sum()) for f in frames]
+            counts = [int(s.sum()) if n >= o.min_verify_points else 0 for s, n in zip(seen, support)]
             best = int(np.argmax(counts))
             if counts[best] == 0:
                 break
             kf_ids, kf_uv = self._kf_index[frames[best]]
             sel = seen[best]
+            pending &= ~sel
+            # the model from live tracks only (known to be right): candidates on a repeated texture
+            # move together and would otherwise carry their own wrong model
+            common, a, b = np.intersect1d(kf_ids, self._ids, assume_unique=True, return_indices=True)
+            model = fit_two_view_model(kf_uv[a], self._uv[b], o.reid_geometry_px, o.homography_share,
+                                       o.min_verify_points, o.ransac_method)
+            if model is None:
+                continue
             position = {int(i): n for n, i in enumerate(kf_ids.tolist())}
             cand_then = kf_uv[[position[int(i)] for i in lost_ids[sel]]]
-            common, a, b = np.intersect1d(kf_ids, self._ids, assume_unique=True, return_indices=True)
-            uv_then = np.r_[cand_then, kf_uv[a]]
-            uv_now_all = np.r_[uv_now[sel], self._uv[b]]
-            pending &= ~sel
-            if len(uv_then) < o.min_verify_points:
-                continue
-            inl = geometric_inliers(uv_then, uv_now_all, o.reid_geometry_px, o.homography_share,
-                                    o.homography_px_factor, o.min_verify_points, o.ransac_method)
-            ok[np.flatnonzero(sel)] = inl[: int(sel.sum())]
+            limit = o.reid_geometry_px * (o.homography_px_factor if model[0] == "H" else 1.0)
+            ok[np.flatnonzero(sel)] = two_view_distance(model, cand_then, uv_now[sel]) <= limit
         return ok
 
     # ---------------------------------------------------------------- the result

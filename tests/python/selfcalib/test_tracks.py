@@ -246,11 +246,13 @@ def test_forward_backward_check_drops_points_under_a_sudden_occluder():
     assert tracks.stats["lost_klt"] + tracks.stats["rejected_frame_ransac"] > 20
 
 
-def pan_video(tex: np.ndarray, frames: int = 140, seed: int = 2) -> PlaneVideo:
-    """The view slides 420 px to the right over the texture and back (the first view leaves entirely)."""
+def pan_video(tex: np.ndarray, frames: int = 140, seed: int = 2, pan_px: float = 420.0) -> PlaneVideo:
+    """The view (320 px wide) slides ``pan_px`` to the right over the texture and back: the first
+    view leaves entirely and comes back (each lost point was seen in a keyframe together with
+    points that are still tracked when it returns: the geometric check's support)."""
     times = np.arange(frames) / 30.0
     half = frames // 2
-    x = np.where(np.arange(frames) < half, np.arange(frames), frames - np.arange(frames)) * (420.0 / half)
+    x = np.where(np.arange(frames) < half, np.arange(frames), frames - np.arange(frames)) * (pan_px / half)
     H = [np.array([[1.0, 0.0, -20 - xi], [0.0, 1.0, -20.0 + 5 * np.sin(i / 9)], [0.0, 0.0, 1.0]])
          for i, xi in enumerate(x)]
     return PlaneVideo(tex, H, times, seed=seed)
