@@ -248,7 +248,7 @@ def tables(paths: list[str]) -> str:
     keys = sorted({(r["variant"], r["size"], r["style"]) for r in renders}, key=lambda k: (k[0], k[1], STYLES.index(k[2])))
     for variant, size, style in keys:
         g = [r for r in renders if (r["variant"], r["size"], r["style"]) == (variant, size, style)]
-        def med(f):
+        def med(f, g=g):
             vals = [f(r) for r in g]
             vals = [v for v in vals if v is not None]
             return float(np.median(vals)) if vals else float("nan")

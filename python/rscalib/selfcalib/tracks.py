@@ -815,7 +815,7 @@ class FeatureTracker:
         cand_corner, cand_pool, warp = cand_corner[good], cand_pool[good], warp[good]
         if len(cand_corner) == 0:
             return used
-        for c, p in zip(cand_corner.tolist(), cand_pool.tolist()):
+        for p in cand_pool.tolist():
             self._reid_events.append((self._k, int(pool["ids"][p]), int(pool["lost_frame"][p])))
         self._append(pool["ids"][cand_pool], warp[:, :, 2].astype(np.float64), warp, pool["slot"][cand_pool],
                      pool["desc"][cand_pool, 0], pool["has_desc"][cand_pool, 0], np.ones(len(cand_pool), bool))

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from rscalib.errors import InputError
-from rscalib.selfcalib.tracks import (FeatureTracker, TrackOptions, geometric_inliers, image_velocities,
-                                      track_features)
+from rscalib.selfcalib.tracks import FeatureTracker, TrackOptions, geometric_inliers, image_velocities, track_features
 
 WIDTH, HEIGHT = 320, 240
 K = np.array([[300.0, 0.0, 159.5], [0.0, 300.0, 119.5], [0.0, 0.0, 1.0]])
