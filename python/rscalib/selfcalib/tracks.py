@@ -58,17 +58,17 @@ class TrackOptions:
     scaled to the image (:meth:`scaled`: lengths with the width, counts with the area)."""
 
     # --- corners
-    target_tracks: int = 1000          # live tracks wanted (brief: 500-1500 at 640x480; ~10 ms/frame)
+    target_tracks: int = 800           # live tracks wanted at 640x480 (500-1500 asked; the cost is ~linear)
     grid_cols: int = 8                 # corners spread over cells of ~80x80 px ...
     grid_rows: int = 6                 # ... each asking for its share of target_tracks
     min_distance_px: float = 8.0       # new corners this far from live tracks and from each other
     corner_quality: float = 0.01       # goodFeaturesToTrack qualityLevel (relative to the best corner)
     corner_block_size: int = 5         # its structure-tensor window: 5 is steadier than 3 on H.264
-    detect_every_frames: int = 3       # look for corners this often (a full-image search costs ~9 ms) ...
+    detect_every_frames: int = 4       # look for corners this often (a full-image search costs ~9 ms) ...
     detect_below_fraction: float = 0.8  # ... and every frame while fewer than this share are live
     # --- KLT
-    klt_window_px: int = 13            # 13x13: half the cost of 21x21 at ~the same survival
-    klt_levels: int = 3                # up to ~60 px per frame (fast turns of look-around)
+    klt_window_px: int = 11            # 11x11 at 640 (9x9 at 320): the anchoring, not KLT, sets precision
+    klt_levels: int = 2                # from the constant-velocity guess: ~25 px of surprise a frame
     klt_iterations: int = 10
     klt_epsilon_px: float = 0.03
     fb_max_px: float = 0.5             # forward-backward check (not scaled: LK's precision is in px)
@@ -89,7 +89,7 @@ class TrackOptions:
     anchor: bool = True
     anchor_half_px: int = 9            # 19x19 first view (sqrt-scaled: 13x13 at 320x240; 11x11 there
     #                                    gave 0.21 px RMS, 15x15 0.16, 21x21 more at room creases)
-    anchor_iterations: int = 4         # started at KLT's position and the last warp: 3-4 suffice
+    anchor_iterations: int = 3         # started at KLT's position and the last warp: 3 suffice
     anchor_min_zncc: float = 0.8       # below: the first view no longer matches (re-anchor)
     anchor_max_shift_px: float = 3.0   # anchored vs KLT position (KLT can slip ~2 px in an exposure step)
     on_anchor_failure: str = "end"     # "end" the track, or "reanchor" (a new first view at KLT's
@@ -105,6 +105,8 @@ class TrackOptions:
     reid_min_zncc: float = 0.85        # the returning corner must also align with the first view
     reid_max_shift_px: float = 2.0     # ... within this of the corner
     reid_geometry_px: float = 2.0      # RANSAC check between a keyframe of the lost track and now
+    reid_neighbour_px: float = 20.0    # ... and its motion since then within this (or 3 spreads) of
+    #                                    its 8 nearest live tracks' (an epipolar line is long)
     reid_search_keyframes: int = 60    # keyframes searched for one that saw the candidates
 
     def scaled(self, image_size: tuple[int, int]) -> TrackOptions:
@@ -120,6 +122,7 @@ class TrackOptions:
                        min_distance_px=max(3.0, self.min_distance_px * scale),
                        klt_window_px=odd(self.klt_window_px * math.sqrt(scale)),
                        keyframe_displacement_px=self.keyframe_displacement_px * scale,
+                       reid_neighbour_px=self.reid_neighbour_px * scale,
                        anchor_half_px=max(3, int(round(self.anchor_half_px * math.sqrt(scale)))))
 
 
@@ -474,6 +477,7 @@ class FeatureTracker:
         # live tracks (parallel arrays)
         self._ids = np.zeros(0, np.int64)
         self._uv = np.zeros((0, 2), np.float64)
+        self._step = np.zeros((0, 2), np.float64)   # last frame-to-frame motion (px): KLT's start
         self._warp = np.zeros((0, 2, 3), np.float32)
         self._views = _FirstViews(self._anchors)
         self._slot = np.zeros(0, np.int64)     # each live track's first view in _views
@@ -497,8 +501,7 @@ class FeatureTracker:
                                      "rejected_keyframe_ransac", "anchored", "reanchored", "anchor_failed",
                                      "reid_candidates", "reid_rejected_geometry", "reid_rejected_appearance",
                                      "reid_fired")}
-        self.stats["cpu_s"] = 0.0
-        self.stats["wall_s"] = 0.0
+        self.stats["wall_s"] = 0.0         # in add_frame (per-call CPU clocks cost ~1 ms under load)
 
     # ---------------------------------------------------------------- bookkeeping
     def _empty_pool(self) -> dict:
@@ -511,6 +514,7 @@ class FeatureTracker:
         if release is not None:
             self._views.release(self._slot[release])
         self._ids, self._uv, self._warp = self._ids[keep], self._uv[keep], self._warp[keep]
+        self._step = self._step[keep]
         self._slot = self._slot[keep]
         self._birth_desc, self._has_desc = self._birth_desc[keep], self._has_desc[keep]
         self._anchored = self._anchored[keep]
@@ -518,6 +522,8 @@ class FeatureTracker:
     def _append(self, ids, uv, warp, slots, desc, has_desc, anchored) -> None:
         self._ids = np.r_[self._ids, ids]
         self._uv = np.r_[self._uv, uv]
+        start = np.median(self._step, axis=0) if len(self._step) else np.zeros(2)   # the image's motion
+        self._step = np.r_[self._step, np.tile(start, (len(uv), 1))]
         self._warp = np.concatenate([self._warp, warp])
         self._slot = np.r_[self._slot, slots]
         self._birth_desc = np.concatenate([self._birth_desc, desc])
@@ -572,7 +578,7 @@ class FeatureTracker:
     # ---------------------------------------------------------------- per frame
     def add_frame(self, t_s: float, image: np.ndarray) -> None:
         """Track into the next frame (time ``t_s`` s, grayscale uint8 image of the tracker's size)."""
-        started_cpu, started_wall = time.process_time(), time.perf_counter()
+        started_wall = time.perf_counter()
         image = self._checked(t_s, image)
         self._k += 1
         self._t_s.append(float(t_s))
@@ -585,8 +591,7 @@ class FeatureTracker:
         if keyframe:
             self._anchor(image_f)
             self._verify_keyframe()
-        if (self._k % o.detect_every_frames == 0 or len(self._ids) < o.detect_below_fraction * o.target_tracks
-                or keyframe):
+        if self._k % o.detect_every_frames == 0 or len(self._ids) < o.detect_below_fraction * o.target_tracks:
             self._births(image, image_f)
         if keyframe:
             self._keyframes.append(self._k)
@@ -599,7 +604,6 @@ class FeatureTracker:
         self._obs_uv.append(self._uv.copy())
         self._obs_anchored.append(self._anchored.copy())
         self._prev = image
-        self.stats["cpu_s"] += time.process_time() - started_cpu
         self.stats["wall_s"] += time.perf_counter() - started_wall
 
     def _checked(self, t_s: float, image: np.ndarray) -> np.ndarray:
@@ -630,8 +634,14 @@ class FeatureTracker:
             if abs(gain - 1.0) > 0.005:
                 prev = cv2.convertScaleAbs(prev, alpha=gain)
         p0 = self._uv.astype(np.float32).reshape(-1, 1, 2)
-        p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev, image, p0, None, **self._klt)
-        back, st2, _ = cv2.calcOpticalFlowPyrLK(image, prev, p1, None, **self._klt)
+        # Both passes start from the constant-velocity guess, so a small pyramid suffices for fast
+        # turns; the backward pass does not start at p0 (it would return there trivially).
+        guess = (self._uv + self._step).astype(np.float32).reshape(-1, 1, 2)
+        p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev, image, p0, guess, flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
+                                              **self._klt)
+        back_guess = (p1.reshape(-1, 2) - self._step).astype(np.float32).reshape(-1, 1, 2)
+        back, st2, _ = cv2.calcOpticalFlowPyrLK(image, prev, p1, back_guess, flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
+                                                **self._klt)
         p1, back = p1.reshape(-1, 2).astype(np.float64), back.reshape(-1, 2).astype(np.float64)
         ok = (st1.ravel() == 1) & (st2.ravel() == 1) & np.all(np.isfinite(p1), axis=1)
         ok &= np.linalg.norm(back - self._uv, axis=1) <= o.fb_max_px
@@ -648,6 +658,7 @@ class FeatureTracker:
         self.stats["rejected_frame_ransac"] += int((keep & ~verified).sum())
         self._to_pool(np.flatnonzero(lost | left), self._prev)
         moved = p1 - self._uv
+        self._step = np.where(verified[:, None], moved, 0.0)
         self._uv = np.where(verified[:, None], p1, self._uv)
         self._warp[:, :, 2] = self._warp[:, :, 2] + moved.astype(np.float32)
         self._keep(verified, release=np.flatnonzero(keep & ~verified))
@@ -839,8 +850,11 @@ class FeatureTracker:
             if not pending.any() or not frames:
                 break
             seen = [np.isin(lost_ids, self._kf_index[f][0]) & pending for f in frames]
-            support = [int(np.isin(self._kf_index[f][0], self._ids).sum()) for f in frames]
-            counts = [int(s.sum()) if n >= o.min_verify_points else 0 for s, n in zip(seen, support)]
+            counts = [int(s.sum()) for s in seen]
+            for i in np.argsort(counts)[::-1]:     # the keyframe seeing most that has live support
+                if counts[i] == 0 or np.isin(self._kf_index[frames[i]][0], self._ids).sum() >= o.min_verify_points:
+                    break
+                counts[i] = 0
             best = int(np.argmax(counts))
             if counts[best] == 0:
                 break
@@ -857,7 +871,17 @@ class FeatureTracker:
             position = {int(i): n for n, i in enumerate(kf_ids.tolist())}
             cand_then = kf_uv[[position[int(i)] for i in lost_ids[sel]]]
             limit = o.reid_geometry_px * (o.homography_px_factor if model[0] == "H" else 1.0)
-            ok[np.flatnonzero(sel)] = two_view_distance(model, cand_then, uv_now[sel]) <= limit
+            good = two_view_distance(model, cand_then, uv_now[sel]) <= limit
+            # an epipolar line is long: the candidate must also have moved like its neighbours did
+            then, now = kf_uv[a], self._uv[b]
+            k = min(8, len(then))
+            near = np.argpartition(np.linalg.norm(cand_then[:, None] - then[None], axis=2), k - 1, axis=1)[:, :k]
+            moved = now[near] - then[near]                                  # (C, k, 2)
+            expected = np.median(moved, axis=1)
+            spread = np.median(np.linalg.norm(moved - expected[:, None], axis=2), axis=1)
+            off = np.linalg.norm(uv_now[sel] - cand_then - expected, axis=1)
+            good &= off <= np.maximum(o.reid_neighbour_px, 3.0 * spread)
+            ok[np.flatnonzero(sel)] = good
         return ok
 
     # ---------------------------------------------------------------- the result
@@ -875,7 +899,6 @@ class FeatureTracker:
         stats = dict(self.stats, frames=len(counts), tracks=int(len(np.unique(track_id))),
                      observations=int(len(frame)), keyframes=len(self._keyframes),
                      live_tracks_median=float(np.median(counts)) if counts else 0.0,
-                     ms_per_frame_cpu=1e3 * self.stats["cpu_s"] / max(len(counts), 1),
                      ms_per_frame_wall=1e3 * self.stats["wall_s"] / max(len(counts), 1),
                      options={f.name: getattr(self.options, f.name) for f in fields(self.options)})
         events = np.array(self._reid_events, np.int64).reshape(-1, 3)
