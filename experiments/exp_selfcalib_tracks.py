@@ -20,10 +20,10 @@ rscalib.selfcalib.tracks.track_features over
 audits the filter's own tracks (the SOG bank with the image front end "tracked", docs/sog.md §19,
 through benchmarks/exp_selfcalib_bundle.py) on the same renders.
 
-Usage: PYTHONPATH=python RSCALIB_SHARED_DATA=../shared/data OMP_NUM_THREADS=1 .venv/bin/python
+Usage (after `make install`): RSCALIB_SHARED_DATA=../shared/data OMP_NUM_THREADS=1 .venv/bin/python
            experiments/exp_selfcalib_tracks.py [--sizes 320x240,640x480] [--styles walk-forward,...]
            [--seeds 3] [--seed0 1100] [--frames 200] [--cache /tmp/rscalib_h11_selfcalib_realistic]
-           [--variant default|no-anchor|no-reid] [--filter] [--desk] [--no-renders]
+           [--variant default|no-anchor|reanchor|no-reid|magsac|fast] [--filter] [--desk] [--no-renders]
            [--out benchmarks/results/exp_selfcalib_tracks.json]
        ... experiments/exp_selfcalib_tracks.py --table FILE [FILE ...]   (the markdown tables)
 """
@@ -54,10 +54,9 @@ VARIANTS = {
     "default": {},
     "no-anchor": {"anchor": False},
     "no-reid": {"reid": False},
+    "reanchor": {"on_anchor_failure": "reanchor"},
     "magsac": {"ransac_method": "magsac"},
-    "klt9-2": {"klt_window_px": 9, "klt_levels": 2},
-    "klt11-2": {"klt_window_px": 11, "klt_levels": 2},
-    "klt13-3": {"klt_window_px": 13, "klt_levels": 3},
+    "fast": {"target_tracks": 500},
 }
 
 
