@@ -95,6 +95,9 @@ class TrackOptions:
     on_anchor_failure: str = "end"     # "end" the track, or "reanchor" (a new first view at KLT's
     #                                    position: the track goes on, with that position's error kept)
     anchor_max_scale: float = 1.6      # warp's singular values beyond [1/this, this]: re-anchor
+    max_position_sigma: float = 16.0   # no track from a first view that fixes a position this badly
+    #                                    (TrackSet.position_sigma; the worst ~10 %: on renders their
+    #                                    error at ages >= 40 was 2-4x that of the best quarter, §22)
     border_px: int = 2                 # tracks keep their patch this far inside the image
     # --- re-identification
     reid: bool = True
@@ -123,6 +126,7 @@ class TrackOptions:
                        klt_window_px=odd(self.klt_window_px * math.sqrt(scale)),
                        keyframe_displacement_px=self.keyframe_displacement_px * scale,
                        reid_neighbour_px=self.reid_neighbour_px * scale,
+                       max_position_sigma=self.max_position_sigma * scale,   # ∝ 1 / gradient per px
                        anchor_half_px=max(3, int(round(self.anchor_half_px * math.sqrt(scale)))))
 
 
@@ -147,7 +151,8 @@ class KeyframeObservations:
 class TrackSet:
     """Every observation of every track: ``frame`` (N,), ``track_id`` (N,), ``uv_px`` (N, 2),
     ``velocity_px_s`` (N, 2), ``anchored`` (N,): refined against the track's first view (at
-    keyframes). Per frame: ``t_s`` (F,); ``keyframes``: frame indices. ``stats``: counters and the
+    keyframes), ``position_sigma`` (N,): how well the track's first view fixes a position (its
+    :func:`_position_sigma`: relative, for weighting; larger is worse). Per frame: ``t_s`` (F,); ``keyframes``: frame indices. ``stats``: counters and the
     tracker's time; ``reid_events``: (frame, track id, frame it was last seen) per re-identification."""
 
     image_size: tuple[int, int]
@@ -158,6 +163,7 @@ class TrackSet:
     uv_px: np.ndarray
     velocity_px_s: np.ndarray
     anchored: np.ndarray
+    position_sigma: np.ndarray = field(default_factory=lambda: np.zeros(0))
     stats: dict = field(default_factory=dict)
     reid_events: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
 
@@ -405,6 +411,14 @@ class _Anchors:
         return warp, zncc
 
 
+def _position_sigma(hessian_inv: np.ndarray) -> np.ndarray:
+    """Per first view: the standard deviation (px) of its position with its shape free, for unit
+    noise on the normalised patch (largest eigenvalue of the translation block of H⁻¹): large for a
+    patch on an edge (its position along the edge is not determined)."""
+    block = hessian_inv[:, 4:6, 4:6].astype(np.float64)
+    return np.sqrt(np.maximum(np.linalg.eigvalsh(0.5 * (block + block.transpose(0, 2, 1)))[:, 1], 0.0))
+
+
 def _take(ref: dict, index: np.ndarray) -> dict:
     return {k: v[index] for k, v in ref.items()}
 
@@ -493,6 +507,7 @@ class FeatureTracker:
         self._obs_ids: list[np.ndarray] = []
         self._obs_uv: list[np.ndarray] = []
         self._obs_anchored: list[np.ndarray] = []
+        self._track_sigma: list[float] = []     # per track id: how well its first view fixes a position
         self._t_s: list[float] = []
         self._keyframes: list[int] = []
         self._kf_index: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -774,8 +789,11 @@ class FeatureTracker:
         new = np.flatnonzero(~revived)
         warp = _translation_warps(corners[new])
         ref = self._anchors.make(image_f, warp)
-        textured = ref["texture"] > 1.0     # a flat patch cannot anchor (grey levels)
+        sigma = _position_sigma(ref["hessian_inv"])
+        # a flat patch cannot anchor (grey levels); an edge-like one slides along its edge
+        textured = (ref["texture"] > 1.0) & (sigma <= self.options.max_position_sigma)
         new, warp, ref = new[textured], warp[textured], _take(ref, textured)
+        self._track_sigma.extend(sigma[textured].tolist())
         ids = np.arange(self._next_id, self._next_id + len(new), dtype=np.int64)
         self._next_id += len(new)
         self._append(ids, corners[new], warp, self._views.add(ref), desc[new], has_desc[new], np.ones(len(new), bool))
@@ -894,16 +912,19 @@ class FeatureTracker:
         track_id = np.concatenate(self._obs_ids) if counts else np.zeros(0, np.int64)
         uv = np.concatenate(self._obs_uv) if counts else np.zeros((0, 2))
         anchored = np.concatenate(self._obs_anchored) if counts else np.zeros(0, bool)
+        position_sigma = np.asarray(self._track_sigma)[track_id] if counts else np.zeros(0)
         t_s = np.asarray(self._t_s)
         velocity = image_velocities(frame, track_id, uv, t_s)
         stats = dict(self.stats, frames=len(counts), tracks=int(len(np.unique(track_id))),
                      observations=int(len(frame)), keyframes=len(self._keyframes),
                      live_tracks_median=float(np.median(counts)) if counts else 0.0,
                      ms_per_frame_wall=1e3 * self.stats["wall_s"] / max(len(counts), 1),
+                     first_view_mb=sum(v.nbytes for v in self._views.arrays.values()) / 2 ** 20,
+                     observations_mb=(frame.nbytes + track_id.nbytes + uv.nbytes + 2 * uv.nbytes) / 2 ** 20,
                      options={f.name: getattr(self.options, f.name) for f in fields(self.options)})
         events = np.array(self._reid_events, np.int64).reshape(-1, 3)
         return TrackSet(self.image_size, t_s, np.asarray(self._keyframes, np.int64), frame, track_id, uv, velocity,
-                        anchored, stats, events)
+                        anchored, position_sigma=position_sigma, stats=stats, reid_events=events)
 
 
 def _hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:

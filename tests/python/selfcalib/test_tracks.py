@@ -313,3 +313,18 @@ def test_bad_input_is_refused_with_a_clear_message():
         FeatureTracker((16, 16))
     with pytest.raises(InputError, match="RANSAC method"):
         geometric_inliers(np.zeros((20, 2)), np.zeros((20, 2)), 1.0, method="lmeds")
+
+
+def test_no_track_starts_on_an_edge_and_position_sigma_ranks_first_views(wandering):
+    """Stripes (intensity varying along x only) fix no position along y: no track is born there;
+    on the blob texture every track has a finite position_sigma under the threshold."""
+    rng = np.random.default_rng(4)
+    x = np.arange(WIDTH)
+    stripes = 128 + 60 * np.sin(2 * np.pi * x / 23.0) + 30 * np.sin(2 * np.pi * x / 7.0)
+    frames = [(0.033 * k, np.clip(np.tile(stripes + 2.0 * k, (HEIGHT, 1)) + rng.normal(0, 1.0, (HEIGHT, WIDTH)),
+                                  0, 255).astype(np.uint8)) for k in range(4)]
+    assert len(track_features(frames)) == 0
+    _, tracks = wandering
+    limit = TrackOptions().scaled((WIDTH, HEIGHT)).max_position_sigma
+    assert np.all(np.isfinite(tracks.position_sigma)) and np.all(tracks.position_sigma <= limit)
+    assert len(tracks.position_sigma) == len(tracks)
