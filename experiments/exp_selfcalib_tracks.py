@@ -118,6 +118,17 @@ def audit(tracks: TrackSet, truth: dict) -> dict:
     at_keyframe = np.isin(tracks.frame, tracks.keyframes)
     out = {"all": error_stats(err, radial, radius, age, finite & (age > 0)),
            "keyframes": error_stats(err, radial, radius, age, finite & (age > 0) & at_keyframe)}
+    # the tracks' own precision index against their error (keyframe observations, by quartile)
+    sel = finite & (age > 0) & at_keyframe & (err <= 2)
+    if sel.sum() > 100:
+        edges = np.r_[-np.inf, np.percentile(tracks.position_sigma[sel], [25, 50, 75]), np.inf]
+        out["by_sigma_quartile"] = []
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            q = sel & (tracks.position_sigma > lo) & (tracks.position_sigma <= hi)
+            young, old = q & (age < 5), q & (age >= 40)
+            out["by_sigma_quartile"].append({
+                "sigma_to": float(hi), "rms_px_ages_1_5": float(np.sqrt(np.mean(err[young] ** 2))) if young.any() else None,
+                "rms_px_ages_40": float(np.sqrt(np.mean(err[old] ** 2))) if old.any() else None})
     # re-identification: the revived observation against the old id's truth
     events = tracks.reid_events
     correct = []
@@ -270,6 +281,22 @@ def tables(paths: list[str]) -> str:
                    f"{med(lambda r: r['span_p90']):.0f} | {med(lambda r: r['tracks_3_keyframes']):.0f} | {rms} | "
                    f"{radial:+.1e} | {100 * med(lambda r: r['audit']['all']['beyond_2px']):.2f} % | {fired} ({right}) | "
                    f"{med(lambda r: r['ms_per_frame_cpu']):.1f} |")
+    quart = [r for r in renders if "by_sigma_quartile" in r["audit"]]
+    if quart:
+        out += ["", "| variant | style | size | RMS px at ages >= 40 (1-5) by quartile of position_sigma, best to worst |",
+                "|---|---|---|---|"]
+        for variant, size, style in keys:
+            g = [r for r in quart if (r["variant"], r["size"], r["style"]) == (variant, size, style)]
+            if not g:
+                continue
+            cells = []
+            for i in range(4):
+                old = [r["audit"]["by_sigma_quartile"][i]["rms_px_ages_40"] for r in g]
+                young = [r["audit"]["by_sigma_quartile"][i]["rms_px_ages_1_5"] for r in g]
+                old = [v for v in old if v is not None]
+                young = [v for v in young if v is not None]
+                cells.append(f"{np.median(old) if old else np.nan:.2f} ({np.median(young) if young else np.nan:.2f})")
+            out.append(f"| {variant} | {style} | {size} | {' / '.join(cells)} |")
     filt = [r for r in renders if "filter" in r]
     if filt:
         out += ["", "| filter front end (\"tracked\") | size | runs | RMS px at ages 1-5 / 5-15 / 15-40 / >= 40 | > 2 px | observations |",

@@ -64,8 +64,10 @@ class TrackOptions:
     min_distance_px: float = 8.0       # new corners this far from live tracks and from each other
     corner_quality: float = 0.01       # goodFeaturesToTrack qualityLevel (relative to the best corner)
     corner_block_size: int = 5         # its structure-tensor window: 5 is steadier than 3 on H.264
-    detect_every_frames: int = 4       # look for corners this often (a full-image search costs ~9 ms) ...
-    detect_below_fraction: float = 0.8  # ... and every frame while fewer than this share are live
+    detect_every_frames: int = 3       # look for corners this often (a search costs ~3 ms at 640x480) ...
+    detect_below_fraction: float = 0.5  # ... and every frame while fewer than this share are live
+    corner_half_resolution_from_px: int = 480  # images this wide look for corners at half resolution
+    #                                            (4x cheaper; the first view, not the corner, is the point)
     # --- KLT
     klt_window_px: int = 11            # 11x11 at 640 (9x9 at 320): the anchoring, not KLT, sets precision
     klt_levels: int = 2                # from the constant-velocity guess: ~25 px of surprise a frame
@@ -485,6 +487,7 @@ class FeatureTracker:
         self._klt = dict(winSize=(o.klt_window_px, o.klt_window_px), maxLevel=o.klt_levels,
                          criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, o.klt_iterations, o.klt_epsilon_px))
         self._disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * int(o.min_distance_px) + 1,) * 2)
+        self._disk_half = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * int(o.min_distance_px / 2) + 1,) * 2)
         self._next_id = 0
         self._k = -1
         self._prev: Optional[np.ndarray] = None
@@ -612,7 +615,8 @@ class FeatureTracker:
             self._keyframes.append(self._k)
             self._last_kf = self._k
             self._kf_ids, self._kf_uv = self._ids.copy(), self._uv.copy()
-            self._kf_index[self._k] = (self._ids.copy(), self._uv.copy())
+            order = np.argsort(self._ids)
+            self._kf_index[self._k] = (self._ids[order], self._uv[order])   # ids sorted: _member
             if len(self._keyframes) > o.reid_search_keyframes:
                 self._kf_index.pop(self._keyframes[-o.reid_search_keyframes - 1], None)
         self._obs_ids.append(self._ids.copy())
@@ -645,7 +649,7 @@ class FeatureTracker:
         o = self.options
         prev = self._prev
         if o.klt_gain:    # a global gain from the frames' mean levels (auto-exposure is global)
-            gain = float(np.mean(image)) / max(float(np.mean(prev)), 1.0)
+            gain = cv2.mean(image)[0] / max(cv2.mean(prev)[0], 1.0)
             if abs(gain - 1.0) > 0.005:
                 prev = cv2.convertScaleAbs(prev, alpha=gain)
         p0 = self._uv.astype(np.float32).reshape(-1, 1, 2)
@@ -745,19 +749,24 @@ class FeatureTracker:
         wanted = int(deficit.sum())
         if wanted == 0 or len(self._ids) >= o.target_tracks:
             return np.zeros((0, 2))
-        mask = np.zeros((h, w), np.uint8)
+        level = 1 if w >= o.corner_half_resolution_from_px else 0
+        f = 2 ** level
+        search = cv2.pyrDown(image) if level else image
+        sh, sw = search.shape
+        mask = np.zeros((sh, sw), np.uint8)
         if len(self._uv):
-            uv_int = np.round(self._uv).astype(np.int64)
-            mask[np.clip(uv_int[:, 1], 0, h - 1), np.clip(uv_int[:, 0], 0, w - 1)] = 255
-            mask = cv2.dilate(mask, self._disk)
+            uv_int = np.round(self._uv / f).astype(np.int64)
+            mask[np.clip(uv_int[:, 1], 0, sh - 1), np.clip(uv_int[:, 0], 0, sw - 1)] = 255
+            mask = cv2.dilate(mask, self._disk if level == 0 else self._disk_half)
         mask = np.where(mask > 0, 0, 255).astype(np.uint8)
-        m = self._margin
-        mask[:m], mask[h - m:], mask[:, :m], mask[:, w - m:] = 0, 0, 0, 0
-        found = cv2.goodFeaturesToTrack(image, maxCorners=min(4 * wanted + 50, 4 * o.target_tracks),
-                                        qualityLevel=o.corner_quality, minDistance=o.min_distance_px, mask=mask,
-                                        blockSize=o.corner_block_size)
+        m = int(math.ceil(self._margin / f))
+        mask[:m], mask[sh - m:], mask[:, :m], mask[:, sw - m:] = 0, 0, 0, 0
+        found = cv2.goodFeaturesToTrack(search, maxCorners=min(4 * wanted + 50, 4 * o.target_tracks),
+                                        qualityLevel=o.corner_quality, minDistance=o.min_distance_px / f, mask=mask,
+                                        blockSize=o.corner_block_size if level == 0 else 3)
         if found is None:
             return np.zeros((0, 2))
+        found = found * f          # pyrDown's pixel i is centred on pixel 2i
         found = found.reshape(-1, 2).astype(np.float64)
         cell = self._cell_index(found)
         order = np.argsort(cell, kind="stable")      # goodFeaturesToTrack: strongest first
@@ -864,13 +873,13 @@ class FeatureTracker:
         ok = np.zeros(len(lost_ids), bool)
         pending = np.ones(len(lost_ids), bool)
         frames = sorted(self._kf_index)
-        for _ in range(3):
+        for _ in range(2):
             if not pending.any() or not frames:
                 break
-            seen = [np.isin(lost_ids, self._kf_index[f][0]) & pending for f in frames]
+            seen = [_member(self._kf_index[f][0], lost_ids) & pending for f in frames]
             counts = [int(s.sum()) for s in seen]
             for i in np.argsort(counts)[::-1]:     # the keyframe seeing most that has live support
-                if counts[i] == 0 or np.isin(self._kf_index[frames[i]][0], self._ids).sum() >= o.min_verify_points:
+                if counts[i] == 0 or _member(self._kf_index[frames[i]][0], self._ids).sum() >= o.min_verify_points:
                     break
                 counts[i] = 0
             best = int(np.argmax(counts))
@@ -881,13 +890,12 @@ class FeatureTracker:
             pending &= ~sel
             # the model from live tracks only (known to be right): candidates on a repeated texture
             # move together and would otherwise carry their own wrong model
-            common, a, b = np.intersect1d(kf_ids, self._ids, assume_unique=True, return_indices=True)
+            _, a, b = np.intersect1d(kf_ids, self._ids, assume_unique=True, return_indices=True)
             model = fit_two_view_model(kf_uv[a], self._uv[b], o.reid_geometry_px, o.homography_share,
                                        o.min_verify_points, o.ransac_method)
             if model is None:
                 continue
-            position = {int(i): n for n, i in enumerate(kf_ids.tolist())}
-            cand_then = kf_uv[[position[int(i)] for i in lost_ids[sel]]]
+            cand_then = kf_uv[np.searchsorted(kf_ids, lost_ids[sel])]
             limit = o.reid_geometry_px * (o.homography_px_factor if model[0] == "H" else 1.0)
             good = two_view_distance(model, cand_then, uv_now[sel]) <= limit
             # an epipolar line is long: the candidate must also have moved like its neighbours did
@@ -925,6 +933,14 @@ class FeatureTracker:
         events = np.array(self._reid_events, np.int64).reshape(-1, 3)
         return TrackSet(self.image_size, t_s, np.asarray(self._keyframes, np.int64), frame, track_id, uv, velocity,
                         anchored, position_sigma=position_sigma, stats=stats, reid_events=events)
+
+
+def _member(sorted_ids: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Which of ``query`` are in ``sorted_ids`` (sorted, unique)."""
+    if len(sorted_ids) == 0:
+        return np.zeros(len(query), bool)
+    index = np.minimum(np.searchsorted(sorted_ids, query), len(sorted_ids) - 1)
+    return sorted_ids[index] == query
 
 
 def _hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:
