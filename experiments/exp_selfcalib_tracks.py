@@ -79,6 +79,8 @@ def length_stats(tracks: TrackSet, cpu_ms_per_frame: float) -> dict:
             "keyframes": int(len(tracks.keyframes)),
             "ms_per_frame_cpu": round(cpu_ms_per_frame, 2),
             "ms_per_frame_wall": round(tracks.stats["ms_per_frame_wall"], 2),
+            "first_view_mb": round(tracks.stats["first_view_mb"], 1),
+            "observations_mb": round(tracks.stats["observations_mb"], 1),
             "counters": {k: v for k, v in tracks.stats.items() if isinstance(v, int)}}
 
 
