@@ -97,9 +97,10 @@ class TrackOptions:
     on_anchor_failure: str = "end"     # "end" the track, or "reanchor" (a new first view at KLT's
     #                                    position: the track goes on, with that position's error kept)
     anchor_max_scale: float = 1.6      # warp's singular values beyond [1/this, this]: re-anchor
-    max_position_sigma: float = 16.0   # no track from a first view that fixes a position this badly
-    #                                    (TrackSet.position_sigma; the worst ~10 %: on renders their
-    #                                    error at ages >= 40 was 2-4x that of the best quarter, §22)
+    max_position_sigma: float = 0.5    # no track from a first view that fixes a position this badly
+    #                                    (TrackSet.position_sigma, px per grey level of noise): on
+    #                                    look-around 640 the tracks above 0.6 had a median RMS error
+    #                                    of 0.7-0.9 px, those below 0.29 0.12 px (§22)
     border_px: int = 2                 # tracks keep their patch this far inside the image
     # --- re-identification
     reid: bool = True
@@ -413,12 +414,14 @@ class _Anchors:
         return warp, zncc
 
 
-def _position_sigma(hessian_inv: np.ndarray) -> np.ndarray:
-    """Per first view: the standard deviation (px) of its position with its shape free, for unit
-    noise on the normalised patch (largest eigenvalue of the translation block of H⁻¹): large for a
-    patch on an edge (its position along the edge is not determined)."""
+def _position_sigma(hessian_inv: np.ndarray, texture: np.ndarray) -> np.ndarray:
+    """Per first view: the standard deviation (px) of its position with its shape free, per grey
+    level of image noise: the largest eigenvalue of the translation block of H⁻¹ (the normalised
+    patch's) divided by the patch's contrast (its standard deviation in grey levels). Large on an
+    edge (the position along it is not fixed) and on faint texture."""
     block = hessian_inv[:, 4:6, 4:6].astype(np.float64)
-    return np.sqrt(np.maximum(np.linalg.eigvalsh(0.5 * (block + block.transpose(0, 2, 1)))[:, 1], 0.0))
+    shape = np.sqrt(np.maximum(np.linalg.eigvalsh(0.5 * (block + block.transpose(0, 2, 1)))[:, 1], 0.0))
+    return shape / np.maximum(np.asarray(texture, np.float64), 1e-6)
 
 
 def _take(ref: dict, index: np.ndarray) -> dict:
@@ -798,8 +801,8 @@ class FeatureTracker:
         new = np.flatnonzero(~revived)
         warp = _translation_warps(corners[new])
         ref = self._anchors.make(image_f, warp)
-        sigma = _position_sigma(ref["hessian_inv"])
-        # a flat patch cannot anchor (grey levels); an edge-like one slides along its edge
+        sigma = _position_sigma(ref["hessian_inv"], ref["texture"])
+        # a flat patch cannot anchor (grey levels); an edge-like or faint one slides
         textured = (ref["texture"] > 1.0) & (sigma <= self.options.max_position_sigma)
         new, warp, ref = new[textured], warp[textured], _take(ref, textured)
         self._track_sigma.extend(sigma[textured].tolist())
