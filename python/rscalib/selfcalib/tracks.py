@@ -19,7 +19,8 @@ what is being estimated):
   few frames only. A track whose first view no longer matches ends there (re-anchoring it at its
   KLT position instead keeps that position's error for the rest of the track: measured, §22).
 - **New corners** (``cv2.goodFeaturesToTrack``) where tracks are missing, away from live tracks,
-  spread over a grid of cells.
+  spread over a grid of cells; a corner whose first view fixes a position badly (an edge, faint
+  texture: ``position_sigma``, which also weights the track for the adjustment) starts no track.
 - **Re-identification**: a track that is lost (left the view, or failed the KLT check) keeps its
   ORB descriptors (at birth and where it was last seen), first view and warp for a while; a new
   corner that matches one (ratio test, mutual best), passes a RANSAC check between a keyframe where
@@ -65,7 +66,7 @@ class TrackOptions:
     corner_quality: float = 0.01       # goodFeaturesToTrack qualityLevel (relative to the best corner)
     corner_block_size: int = 5         # its structure-tensor window: 5 is steadier than 3 on H.264
     detect_every_frames: int = 3       # look for corners this often (a search costs ~3 ms at 640x480) ...
-    detect_below_fraction: float = 0.5  # ... and every frame while fewer than this share are live
+    detect_below_fraction: float = 0.25  # ... and every frame while fewer than this share are live
     corner_half_resolution_from_px: int = 480  # images this wide look for corners at half resolution
     #                                            (4x cheaper; the first view, not the corner, is the point)
     # --- KLT
@@ -92,11 +93,11 @@ class TrackOptions:
     anchor_half_px: int = 9            # 19x19 first view (sqrt-scaled: 13x13 at 320x240; 11x11 there
     #                                    gave 0.21 px RMS, 15x15 0.16, 21x21 more at room creases)
     anchor_iterations: int = 3         # started at KLT's position and the last warp: 3 suffice
-    anchor_min_zncc: float = 0.8       # below: the first view no longer matches (re-anchor)
+    anchor_min_zncc: float = 0.8       # below: the first view no longer matches (on_anchor_failure)
     anchor_max_shift_px: float = 3.0   # anchored vs KLT position (KLT can slip ~2 px in an exposure step)
     on_anchor_failure: str = "end"     # "end" the track, or "reanchor" (a new first view at KLT's
     #                                    position: the track goes on, with that position's error kept)
-    anchor_max_scale: float = 1.6      # warp's singular values beyond [1/this, this]: re-anchor
+    anchor_max_scale: float = 1.6      # warp's singular values beyond [1/this, this]: no longer matches
     max_position_sigma: float = 0.5    # no track from a first view that fixes a position this badly
     #                                    (TrackSet.position_sigma, px per grey level of noise): on
     #                                    look-around 640 the tracks above 0.6 had a median RMS error
@@ -137,7 +138,8 @@ class TrackOptions:
 class KeyframeObservations:
     """Observations at keyframes, for the adjustment: row i is track ``track_id[i]`` seen at
     ``uv_px[i]`` (distorted pixels) in frame ``frame[i]`` (time ``t_s[i]``), moving at
-    ``velocity_px_s[i]`` (NaN: unknown, e.g. a track seen in one frame only)."""
+    ``velocity_px_s[i]`` (NaN: unknown, e.g. a track seen in one frame only), its track's
+    ``position_sigma[i]`` (px per grey level of image noise: a relative weight, larger is worse)."""
 
     frame: np.ndarray
     t_s: np.ndarray
@@ -145,6 +147,7 @@ class KeyframeObservations:
     uv_px: np.ndarray
     velocity_px_s: np.ndarray
     keyframes: np.ndarray
+    position_sigma: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def __len__(self) -> int:
         return len(self.frame)
@@ -154,8 +157,8 @@ class KeyframeObservations:
 class TrackSet:
     """Every observation of every track: ``frame`` (N,), ``track_id`` (N,), ``uv_px`` (N, 2),
     ``velocity_px_s`` (N, 2), ``anchored`` (N,): refined against the track's first view (at
-    keyframes), ``position_sigma`` (N,): how well the track's first view fixes a position (its
-    :func:`_position_sigma`: relative, for weighting; larger is worse). Per frame: ``t_s`` (F,); ``keyframes``: frame indices. ``stats``: counters and the
+    keyframes), ``position_sigma`` (N,): how well the track's first view fixes a position (px per
+    grey level of image noise: a relative weight for the adjustment; larger is worse). Per frame: ``t_s`` (F,); ``keyframes``: frame indices. ``stats``: counters and the
     tracker's time; ``reid_events``: (frame, track id, frame it was last seen) per re-identification."""
 
     image_size: tuple[int, int]
@@ -195,8 +198,9 @@ class TrackSet:
         rows = np.flatnonzero(np.isin(self.frame, keyframes))
         ids, counts = np.unique(self.track_id[rows], return_counts=True)
         rows = rows[np.isin(self.track_id[rows], ids[counts >= min_keyframes])]
+        sigma = self.position_sigma[rows].copy() if len(self.position_sigma) == len(self) else np.full(len(rows), np.nan)
         return KeyframeObservations(self.frame[rows].copy(), self.t_s[self.frame[rows]], self.track_id[rows].copy(),
-                                    self.uv_px[rows].copy(), self.velocity_px_s[rows].copy(), keyframes)
+                                    self.uv_px[rows].copy(), self.velocity_px_s[rows].copy(), keyframes, sigma)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -794,21 +798,25 @@ class FeatureTracker:
         corners = self._corners(image)
         if len(corners) == 0:
             return
+        # first views of all candidates at once; a flat patch cannot anchor (grey levels), an
+        # edge-like or faint one slides: such corners go no further (no descriptor, no matching)
+        warp = _translation_warps(corners)
+        ref = self._anchors.make(image_f, warp)
+        sigma = _position_sigma(ref["hessian_inv"], ref["texture"])
+        keep = (ref["texture"] > 1.0) & (sigma <= self.options.max_position_sigma)
+        corners, warp, ref, sigma = corners[keep], warp[keep], _take(ref, keep), sigma[keep]
+        if len(corners) == 0:
+            return
         desc, has_desc = self._describe(image, corners)
         revived = np.zeros(len(corners), bool)
         if self.options.reid and len(self._pool["ids"]):
             revived = self._reidentify(image_f, corners, desc, has_desc)
         new = np.flatnonzero(~revived)
-        warp = _translation_warps(corners[new])
-        ref = self._anchors.make(image_f, warp)
-        sigma = _position_sigma(ref["hessian_inv"], ref["texture"])
-        # a flat patch cannot anchor (grey levels); an edge-like or faint one slides
-        textured = (ref["texture"] > 1.0) & (sigma <= self.options.max_position_sigma)
-        new, warp, ref = new[textured], warp[textured], _take(ref, textured)
-        self._track_sigma.extend(sigma[textured].tolist())
+        self._track_sigma.extend(sigma[new].tolist())
         ids = np.arange(self._next_id, self._next_id + len(new), dtype=np.int64)
         self._next_id += len(new)
-        self._append(ids, corners[new], warp, self._views.add(ref), desc[new], has_desc[new], np.ones(len(new), bool))
+        self._append(ids, corners[new], warp[new], self._views.add(_take(ref, new)), desc[new], has_desc[new],
+                     np.ones(len(new), bool))
         self.stats["births"] += len(new)
 
     def _reidentify(self, image_f: np.ndarray, corners: np.ndarray, desc: np.ndarray, has_desc: np.ndarray

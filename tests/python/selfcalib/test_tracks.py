@@ -151,6 +151,7 @@ def test_keyframes_and_their_observations(wandering):
     _, counts = np.unique(obs.track_id, return_counts=True)
     assert counts.min() >= 3
     np.testing.assert_array_equal(obs.t_s, tracks.t_s[obs.frame])
+    assert len(obs.position_sigma) == len(obs) and np.all(np.isfinite(obs.position_sigma))
     thin = tracks.keyframe_observations(min_keyframes=2, max_keyframes=5)
     assert len(np.unique(thin.frame)) <= 5 and len(thin.keyframes) == 5
     # every keyframe observation was aligned with its track's first view (or is that first view)
