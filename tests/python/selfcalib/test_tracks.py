@@ -167,7 +167,10 @@ def test_image_velocities_against_the_known_motion():
     tex = texture(900, 700, 9)
     H = [np.array([[1.0, 0.0, -300 + velocity[0] * t], [0.0, 1.0, -200 + velocity[1] * t], [0.0, 0.0, 1.0]])
          for t in times]
-    tracks = track_features(PlaneVideo(tex, H, times).frames())
+    done = []
+    tracks = track_features(PlaneVideo(tex, H, times).frames(), frame_count=60,
+                            progress=lambda n, total: done.append((n, total)))
+    assert done[-1] == (60, 60)                                # the progress callback saw every frame
     v = tracks.velocity_px_s
     ok = np.all(np.isfinite(v), axis=1)
     assert ok.mean() > 0.95
