@@ -10,14 +10,17 @@ about 50k observations at the defaults. Start: the truth perturbed (camera 5 % a
 0.6 degrees, points 5 %); the line delay estimated from 0, soft_l1 at 2 px; velocities from the tracks
 (bundle.track_velocity), the same for both engines. Each engine runs in its own process, so each peak RSS
 (ru_maxrss) is its own (the problem's generation included: `baseline` is the peak before the solve).
+Wall times depend on the machine's load (recorded as `load_average`); `cpu_s` is the process's CPU time
+(both threads of the solve).
 
-Usage: .venv/bin/python benchmarks/bench_adjustment.py [--keyframes 300] [--tracks 1500] [--track-length 34]
+Usage: .venv/bin/python benchmarks/bench_adjustment.py [--keyframes 300] [--tracks 1500] [--track-length 60]
          [--engines ceres,scipy] [--threads 2] [--scipy-timeout 1800] [--json FILE]
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -90,24 +93,24 @@ def run_ceres(tracks: FeatureTracks, threads: int) -> dict:
         point=np.searchsorted(ids, tracks.feature_id), uv_px=tracks.uv, image_velocity_px_s=track_velocity(tracks),
         points_w=np.array([tracks.points[int(i)] for i in ids]))
     camera = _core.CameraModel("civera-radial", start_camera(), CAMERA.width, CAMERA.height, [CAMERA.pixel_size_mm] * 2)
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), time.process_time()
     result = adjust(keyframe_tracks, camera, estimate_line_delay=True, reference_row=REFERENCE_ROW,
                     num_threads=threads)
-    wall = time.perf_counter() - started
+    wall, cpu = time.perf_counter() - started, time.process_time() - cpu
     sigma = np.sqrt(np.diag(result.covariance_two_way))
-    return dict(engine="ceres", wall_s=wall, solve_s=result.solve_time_s, covariance_s=result.covariance_time_s,
+    return dict(engine="ceres", wall_s=wall, cpu_s=cpu, solve_s=result.solve_time_s, covariance_s=result.covariance_time_s,
                 iterations=result.iterations, termination=result.termination, converged=result.converged,
                 f=float(result.camera_params[0]), f_sigma=float(sigma[0]), line_delay_s=result.line_delay_s,
                 line_delay_sigma_s=float(sigma[5]), sigma_px=result.sigma_px)
 
 
 def run_scipy(tracks: FeatureTracks) -> dict:
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), time.process_time()
     result = bundle_adjust(tracks, start_camera(), CAMERA.pixel_size_mm, keyframe_step=1, line_delay=True,
                            reference_row=REFERENCE_ROW)
-    wall = time.perf_counter() - started
+    wall, cpu = time.perf_counter() - started, time.process_time() - cpu
     sigma = np.sqrt(np.diag(result.covariance_clustered))
-    return dict(engine="scipy", wall_s=wall, nfev=result.nfev, polish_steps=result.extra["polish_steps"],
+    return dict(engine="scipy", wall_s=wall, cpu_s=cpu, nfev=result.nfev, polish_steps=result.extra["polish_steps"],
                 converged=bool(result.status > 0 or result.step_sigma < 0.1), f=float(result.camera[0]),
                 f_sigma=float(sigma[0]), line_delay_s=result.line_delay_s,
                 line_delay_sigma_s=float(np.sqrt(result.covariance_globals[5, 5]) * 1e-6), sigma_px=result.sigma_px)
@@ -120,7 +123,7 @@ def child(args: argparse.Namespace) -> None:
     out.update(keyframes=args.keyframes, tracks=len(np.unique(tracks.feature_id)), observations=len(tracks),
                threads=args.threads, baseline_peak_mb=baseline_mb,
                peak_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-               truth_f=CAMERA.f, truth_line_delay_s=LINE_DELAY_S)
+               truth_f=CAMERA.f, truth_line_delay_s=LINE_DELAY_S, load_average=os.getloadavg()[0])
     print(json.dumps(out))
 
 
@@ -128,7 +131,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--keyframes", type=int, default=300)
     parser.add_argument("--tracks", type=int, default=1500)
-    parser.add_argument("--track-length", type=int, default=34)
+    parser.add_argument("--track-length", type=int, default=60)
     parser.add_argument("--engines", default="ceres,scipy")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--scipy-timeout", type=float, default=1800.0)

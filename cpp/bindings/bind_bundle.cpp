@@ -27,12 +27,12 @@ namespace {
 
 // A (count, width) float array as a row-major Eigen matrix; InputError on another shape.
 template <int Width>
-Eigen::Matrix<double, Eigen::Dynamic, Width, Width == 1 ? Eigen::ColMajor : Eigen::RowMajor>
-Rows(const DoubleArray& array, const char* what) {
+Eigen::Matrix<double, Eigen::Dynamic, Width, Width == 1 ? Eigen::ColMajor : Eigen::RowMajor> Rows(
+    const DoubleArray& array, const char* what) {
   bool vector = false;
   const py::ssize_t count = CheckRows(array, Width, what, &vector);
-  Eigen::Matrix<double, Eigen::Dynamic, Width, Width == 1 ? Eigen::ColMajor : Eigen::RowMajor>
-      out(count, Width);
+  Eigen::Matrix<double, Eigen::Dynamic, Width, Width == 1 ? Eigen::ColMajor : Eigen::RowMajor> out(
+      count, Width);
   std::copy(array.data(), array.data() + count * Width, out.data());
   return out;
 }
@@ -42,7 +42,8 @@ Eigen::VectorXi Indices(const py::array& array, const char* what) {
   const char kind = array.dtype().kind();
   if ((kind != 'i' && kind != 'u') || array.ndim() != 1)
     throw InputError(std::string(what) + " must be a 1-D array of integers");
-  const auto values = py::array_t<int64_t, py::array::c_style | py::array::forcecast>::ensure(array);
+  const auto values =
+      py::array_t<int64_t, py::array::c_style | py::array::forcecast>::ensure(array);
   Eigen::VectorXi out(values.shape(0));
   for (py::ssize_t i = 0; i < values.shape(0); ++i) {
     const int64_t v = values.data()[i];
@@ -148,8 +149,8 @@ void BindBundle(py::module_& m) {
 
   m.def("solve_bundle", &Solve, py::arg("camera"), py::arg("keyframe_poses"),
         py::arg("observation_keyframe"), py::arg("observation_point"), py::arg("uv_px"),
-        py::arg("image_velocity_px_s"), py::arg("point_anchor"), py::arg("points"),
-        py::kw_only(), py::arg("free_intrinsics") = py::none(), py::arg("line_delay_s") = 0.0,
+        py::arg("image_velocity_px_s"), py::arg("point_anchor"), py::arg("points"), py::kw_only(),
+        py::arg("free_intrinsics") = py::none(), py::arg("line_delay_s") = 0.0,
         py::arg("estimate_line_delay") = false, py::arg("line_delay_prior") = py::none(),
         py::arg("reference_row") = 0.0, py::arg("options") = BundleOptions(),
         "The self-calibration bundle adjustment (docs/sog.md §22): keyframe_poses (K, 6) [p; phi] "

@@ -34,22 +34,24 @@ void CheckFinite(const Eigen::Ref<const Eigen::MatrixXd>& values, const char* wh
   for (Eigen::Index r = 0; r < values.rows(); ++r)
     for (Eigen::Index c = 0; c < values.cols(); ++c)
       if (!std::isfinite(values(r, c)))
-        throw InputError(std::string("bundle adjustment: ") + what + " has a NaN or infinite value" +
-                         " in row " + std::to_string(r) + " (every value must be finite)");
+        throw InputError(std::string("bundle adjustment: ") + what +
+                         " has a NaN or infinite value" + " in row " + std::to_string(r) +
+                         " (every value must be finite)");
 }
 
 void CheckOptions(const BundleOptions& options) {
   const auto& loss = options.robust_loss;
   if (loss != "none" && loss != "huber" && loss != "cauchy" && loss != "soft_l1")
-    throw InputError("bundle adjustment: robust_loss must be none, huber, cauchy or soft_l1, got '" +
-                     loss + "'");
+    throw InputError(
+        "bundle adjustment: robust_loss must be none, huber, cauchy or soft_l1, got '" + loss +
+        "'");
   if (!(options.robust_loss_scale_px > 0.0) || !std::isfinite(options.robust_loss_scale_px))
     throw InputError("bundle adjustment: robust_loss_scale_px must be positive and finite");
   if (options.max_iterations < 0 || options.max_iterations > 100000)
     throw InputError("bundle adjustment: max_iterations must be 0..100000, got " +
                      std::to_string(options.max_iterations));
-  for (double tolerance : {options.function_tolerance, options.gradient_tolerance,
-                           options.parameter_tolerance})
+  for (double tolerance :
+       {options.function_tolerance, options.gradient_tolerance, options.parameter_tolerance})
     if (!(tolerance >= 0.0) || !std::isfinite(tolerance))
       throw InputError("bundle adjustment: tolerances must be finite and >= 0");
   if (options.num_threads < 1 || options.num_threads > 1024)
@@ -335,9 +337,8 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
   } else {
     solver_options.linear_solver_type = ceres::SPARSE_SCHUR;
     solver_options.sparse_linear_algebra_library_type =
-        ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE)
-            ? ceres::SUITE_SPARSE
-            : ceres::EIGEN_SPARSE;
+        ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE
+                                                                              : ceres::EIGEN_SPARSE;
   }
   solver_options.linear_solver_ordering = ordering;
   solver_options.max_num_iterations = options.max_iterations;
@@ -368,8 +369,7 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
     result.points_beyond_infinity += point_used[j] && points(j, 2) < 0.0 ? 1 : 0;
 
   // Residuals at the solution.
-  result.residuals_px =
-      Eigen::MatrixX2d::Constant(n, 2, std::numeric_limits<double>::quiet_NaN());
+  result.residuals_px = Eigen::MatrixX2d::Constant(n, 2, std::numeric_limits<double>::quiet_NaN());
   result.inlier = Eigen::Matrix<bool, Eigen::Dynamic, 1>::Constant(n, false);
   double sum_sq = 0.0;
   for (int i = 0; i < n; ++i) {
@@ -482,7 +482,15 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
     priors.push_back({ng - 1, information,
                       information * options.prior_pixel_sigma_px * options.prior_pixel_sigma_px});
   }
+  const auto linearised_at = std::chrono::steady_clock::now();
   const GlobalCovariances cov = ComputeGlobalCovariances(layout, linearised, priors);
+  if (options.verbose)
+    std::cout
+        << "covariance: linearisation "
+        << std::chrono::duration<double>(linearised_at - covariance_start).count()
+        << " s, Schur complements and clusters "
+        << std::chrono::duration<double>(std::chrono::steady_clock::now() - linearised_at).count()
+        << " s" << std::endl;
   // Back to the full layout, the line delay in s/row.
   Eigen::VectorXd unit = Eigen::VectorXd::Ones(ng);
   if (estimate_delay) unit[ng - 1] = kMicroseconds;
@@ -499,14 +507,14 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
   for (int g = 0; g < ng; ++g) {
     result.remaining_step[global_of[g]] = cov.step[g] * unit[g];
     const double sigma = std::sqrt(std::max(cov.model(g, g), 0.0));
-    result.step_sigma = std::max(result.step_sigma, sigma > 0.0
-                                                        ? std::abs(cov.step[g]) / sigma
-                                                        : std::numeric_limits<double>::infinity());
+    result.step_sigma =
+        std::max(result.step_sigma, sigma > 0.0 ? std::abs(cov.step[g]) / sigma
+                                                : std::numeric_limits<double>::infinity());
   }
   result.sigma_px = cov.sigma_px;
   result.dof = cov.dof;
-  result.covariance_ok = cov.full_rank && result.covariance_model.allFinite() &&
-                         result.covariance_two_way.allFinite();
+  result.covariance_ok =
+      cov.full_rank && result.covariance_model.allFinite() && result.covariance_two_way.allFinite();
   result.covariance_time_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - covariance_start).count();
   return result;

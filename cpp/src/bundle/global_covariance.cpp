@@ -41,9 +41,10 @@ int PseudoInverse(const Matrix& a, double relative, Eigen::MatrixXd* inverse) {
       ++rank;
     }
   }
-  *inverse = scale.asDiagonal() *
-             (eigen.eigenvectors() * inverse_values.asDiagonal() * eigen.eigenvectors().transpose()) *
-             scale.asDiagonal();
+  *inverse =
+      scale.asDiagonal() *
+      (eigen.eigenvectors() * inverse_values.asDiagonal() * eigen.eigenvectors().transpose()) *
+      scale.asDiagonal();
   return rank;
 }
 
@@ -64,8 +65,8 @@ bool SymmetricInverse(const Eigen::MatrixXd& a, Eigen::MatrixXd* inverse) {
     if (llt.info() == Eigen::Success) {
       const Eigen::VectorXd diagonal = llt.matrixL().toDenseMatrix().diagonal();
       if (diagonal.minCoeff() > 1e-7 * diagonal.maxCoeff()) {
-        *inverse = scale.asDiagonal() * llt.solve(Eigen::MatrixXd::Identity(n, n)) *
-                   scale.asDiagonal();
+        *inverse =
+            scale.asDiagonal() * llt.solve(Eigen::MatrixXd::Identity(n, n)) * scale.asDiagonal();
         return true;
       }
     }
@@ -103,12 +104,13 @@ Eigen::MatrixXd ClipPositiveSemiDefinite(const Eigen::MatrixXd& a) {
 
 GlobalCovariances ComputeGlobalCovariances(const UnknownLayout& layout,
                                            const std::vector<ObservationLinearisation>& obs,
-                                           const std::vector<GlobalPrior>& priors) {
+                                           const std::vector<GlobalPrior>& priors,
+                                           int dense_pose_limit) {
   const int ng = layout.num_globals;
   const int num_keyframes = static_cast<int>(layout.pose_size.size());
   if (ng < 1 || ng > kMaxGlobals)
-    throw InputError("covariance: the number of globals must be 1.." +
-                     std::to_string(kMaxGlobals) + ", got " + std::to_string(ng));
+    throw InputError("covariance: the number of globals must be 1.." + std::to_string(kMaxGlobals) +
+                     ", got " + std::to_string(ng));
   std::vector<int> pose_offset(num_keyframes + 1, 0);
   for (int k = 0; k < num_keyframes; ++k) {
     const int size = layout.pose_size[k];
@@ -194,7 +196,8 @@ GlobalCovariances ComputeGlobalCovariances(const UnknownLayout& layout,
         const int k = o.pose[s];
         if (k < 0 || layout.pose_size[k] == 0) continue;
         const int tk = layout.pose_size[k];
-        touched(k).topRows(tk).noalias() += o.d_r_d_pose[s].leftCols(tk).transpose() * o.weight * jp;
+        touched(k).topRows(tk).noalias() +=
+            o.d_r_d_pose[s].leftCols(tk).transpose() * o.weight * jp;
       }
     }
     if (start[i + 1] == start[i]) continue;
@@ -245,19 +248,29 @@ GlobalCovariances ComputeGlobalCovariances(const UnknownLayout& layout,
       scale[i] = d > 0.0 ? 1.0 / std::sqrt(d) : 0.0;
     }
     bool solved = false;
-    if (positive) {
+    // the conditioning guard of SymmetricInverse: a tiny pivot of L D L^T is a direction the data
+    // barely fixes (a pose without enough points), whose solve would lose every digit
+    const auto pivots_ok = [](const Eigen::VectorXd& pivots) {
+      return pivots.minCoeff() > 1e-14 * pivots.maxCoeff();
+    };
+    const Eigen::MatrixXd rhs = scale.asDiagonal() * s_gp.transpose();
+    const double density = 2.0 * lower.nonZeros() / (static_cast<double>(np) * np);
+    if (positive && density > 0.05 && np <= dense_pose_limit) {
+      // long tracks link most keyframes: a blocked dense Cholesky is faster than a simplicial one
+      const Eigen::MatrixXd lower_dense =
+          scale.asDiagonal() * Eigen::MatrixXd(lower) * scale.asDiagonal();
+      Eigen::LLT<Eigen::MatrixXd, Eigen::Lower> llt(lower_dense);
+      if (llt.info() == Eigen::Success && pivots_ok(llt.matrixLLT().diagonal().cwiseAbs2())) {
+        y = scale.asDiagonal() * llt.solve(rhs);
+        solved = y.allFinite();
+      }
+    } else if (positive) {
       const Eigen::SparseMatrix<double> scaled = scale.asDiagonal() * lower * scale.asDiagonal();
-      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower,
-                            Eigen::AMDOrdering<int>>
+      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::AMDOrdering<int>>
           ldlt(scaled);
-      // the conditioning guard of SymmetricInverse: a tiny pivot of L D L^T is a direction the
-      // data barely fixes (a pose without enough points), whose solve would lose every digit
-      if (ldlt.info() == Eigen::Success) {
-        const Eigen::VectorXd pivots = ldlt.vectorD();
-        if (pivots.minCoeff() > 1e-14 * pivots.maxCoeff()) {
-          y = scale.asDiagonal() * ldlt.solve(Eigen::MatrixXd(scale.asDiagonal() * s_gp.transpose()));
-          solved = y.allFinite();
-        }
+      if (ldlt.info() == Eigen::Success && pivots_ok(ldlt.vectorD())) {
+        y = scale.asDiagonal() * ldlt.solve(rhs);
+        solved = y.allFinite();
       }
     }
     if (!solved) {  // a pose the data does not fix: the dense pseudo-inverse
@@ -289,9 +302,8 @@ GlobalCovariances ComputeGlobalCovariances(const UnknownLayout& layout,
     // the point's rows of H^-1 E_g: -C^+ (W_g^T Z_g + sum_k W_k^T Z_k)
     Eigen::Matrix<double, 3, Eigen::Dynamic> coupling = point_wg[i].transpose() * z_g;
     for (const auto& [k, wk] : point_wp[i])
-      coupling.noalias() +=
-          wk.topRows(layout.pose_size[k]).transpose() *
-          z_p.middleRows(pose_offset[k], layout.pose_size[k]);
+      coupling.noalias() += wk.topRows(layout.pose_size[k]).transpose() *
+                            z_p.middleRows(pose_offset[k], layout.pose_size[k]);
     const Eigen::Matrix<double, 3, Eigen::Dynamic> z_point = -point_inverse[i] * coupling;
     for (int j = start[i]; j < start[i + 1]; ++j) {
       const auto& o = obs[by_point[j]];

@@ -62,10 +62,10 @@ struct Scene {
   camera::CameraModel camera = PaperCamera();
   double line_delay_s = 0.0;
   double reference_row = 119.5;
-  KeyframePoseMatrix poses;                // truth
-  std::vector<Eigen::Vector3d> points_w;   // truth, those kept
-  BundleData data;                         // the observations; start = truth (perturb it)
-  std::vector<bool> outlier;               // per observation
+  KeyframePoseMatrix poses;               // truth
+  std::vector<Eigen::Vector3d> points_w;  // truth, those kept
+  BundleData data;                        // the observations; start = truth (perturb it)
+  std::vector<bool> outlier;              // per observation
 };
 
 struct SceneOptions {

@@ -182,10 +182,10 @@ TEST(SolveBundle, CovariancesMatchADenseComputationInAnotherGauge) {
     const int k = obs.keyframe[i], j = obs.point[i], a = scene.data.point_anchor[j];
     const Eigen::Vector2d uv = obs.uv_px.row(i).transpose();
     const Eigen::Vector2d velocity = obs.image_velocity_px_s.row(i).transpose();
-    ceres::CostFunction* cost = ReprojectionCost::Create(
-        scene.camera.type(), pixel_size, uv.data(), velocity.data(), 119.5, k == a);
-    if (k == a) problem.AddResidualBlock(cost, nullptr, intrinsics.data(), points.row(j).data(),
-                                         &delay_us);
+    ceres::CostFunction* cost = ReprojectionCost::Create(scene.camera.type(), pixel_size, uv.data(),
+                                                         velocity.data(), 119.5, k == a);
+    if (k == a)
+      problem.AddResidualBlock(cost, nullptr, intrinsics.data(), points.row(j).data(), &delay_us);
     else
       problem.AddResidualBlock(cost, nullptr, intrinsics.data(), poses.row(a).data(),
                                poses.row(k).data(), points.row(j).data(), &delay_us);
@@ -213,7 +213,8 @@ TEST(SolveBundle, CovariancesMatchADenseComputationInAnotherGauge) {
   Eigen::VectorXd weight(2 * n);
   double weighted_sq = 0.0;
   for (int i = 0; i < n; ++i) {
-    const double sq = residuals[2 * i] * residuals[2 * i] + residuals[2 * i + 1] * residuals[2 * i + 1];
+    const double sq =
+        residuals[2 * i] * residuals[2 * i] + residuals[2 * i + 1] * residuals[2 * i + 1];
     weight[2 * i] = weight[2 * i + 1] = 1.0 / std::sqrt(1.0 + sq / (1.0 * 1.0));
     weighted_sq += weight[2 * i] * sq;
   }
@@ -250,7 +251,8 @@ TEST(SolveBundle, CovariancesMatchADenseComputationInAnotherGauge) {
     for (int a = 0; a < g; ++a)
       for (int b = 0; b < g; ++b) {
         const double scale = std::sqrt(expected(a, a) * expected(b, b));
-        EXPECT_NEAR(actual(a, b), expected(a, b) * unit[a] * unit[b], 1e-6 * scale * unit[a] * unit[b])
+        EXPECT_NEAR(actual(a, b), expected(a, b) * unit[a] * unit[b],
+                    1e-6 * scale * unit[a] * unit[b])
             << what << " (" << a << ", " << b << ")";
       }
   };

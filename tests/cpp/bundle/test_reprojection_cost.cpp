@@ -148,17 +148,17 @@ TEST_P(ReprojectionCostTest, ValueMatchesADirectComputationAndJacobiansCentralDi
     EXPECT_LT((residual - expected).norm(), 1e-9) << c.model;
     // the functor with Jets directly: the same value
     using Jet = ceres::Jet<double, 4>;
-    ReprojectionCost functor(cam.type(), pixel_size, uv_obs.data(), velocity.data(),
-                             reference_row);
+    ReprojectionCost functor(cam.type(), pixel_size, uv_obs.data(), velocity.data(), reference_row);
     std::vector<Jet> jet_intrinsics(intrinsics.size());
     for (int i = 0; i < intrinsics.size(); ++i) jet_intrinsics[i] = Jet(intrinsics[i]);
     Jet jet_point[3] = {Jet(abr[0], 0), Jet(abr[1], 1), Jet(abr[2], 2)};
     Jet jet_delay(line_delay_us, 3), jet_residual[2];
     Jet jet_anchor[6], jet_observer[6];
     for (int i = 0; i < 6; ++i) jet_anchor[i] = Jet(anchor[i]), jet_observer[i] = Jet(observer[i]);
-    const bool ok = c.in_anchor ? functor(jet_intrinsics.data(), jet_point, &jet_delay, jet_residual)
-                                : functor(jet_intrinsics.data(), jet_anchor, jet_observer,
-                                          jet_point, &jet_delay, jet_residual);
+    const bool ok = c.in_anchor
+                        ? functor(jet_intrinsics.data(), jet_point, &jet_delay, jet_residual)
+                        : functor(jet_intrinsics.data(), jet_anchor, jet_observer, jet_point,
+                                  &jet_delay, jet_residual);
     ASSERT_TRUE(ok);
     EXPECT_NEAR(jet_residual[0].a, residual[0], 1e-12);
     EXPECT_NEAR(jet_residual[1].a, residual[1], 1e-12);

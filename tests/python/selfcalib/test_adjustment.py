@@ -43,18 +43,19 @@ def _rolling_shutter(sequence, motion, line_delay_s, reference_row):
     return dataclasses.replace(sequence, uv=uv_rs, uv_true=uv_rs)
 
 
-def _feature_tracks(sequence, seed: int = 0) -> FeatureTracks:
-    """The simulated pixels as recorded tracks, with poses (2 cm, 0.6°) and points (5 %) perturbed
-    from the truth: a start like the filter's."""
+def _feature_tracks(sequence, seed: int = 0, every: int = 1) -> FeatureTracks:
+    """The simulated pixels as recorded tracks (of every ``every``-th room point), with poses (2 cm,
+    0.6°) and points (5 %) perturbed from the truth: a start like the filter's."""
     rng = np.random.default_rng(seed)
     R_cw, p_cw = sequence.R_cw, sequence.p_cw
     frames = range(len(sequence))
     turn = Rotation.from_rotvec(rng.normal(0, 0.01, (len(sequence), 3))).as_matrix()
-    seen = np.unique(np.concatenate(sequence.ids))
+    kept = [ids % every == 0 for ids in sequence.ids]
+    seen = np.unique(np.concatenate([ids[k] for ids, k in zip(sequence.ids, kept)]))
     return FeatureTracks(
-        frame=np.concatenate([np.full(len(sequence.ids[k]), k) for k in frames]),
-        feature_id=np.concatenate(sequence.ids).astype(np.int64),
-        uv=np.concatenate(sequence.uv),
+        frame=np.concatenate([np.full(k.sum(), f) for f, k in zip(frames, kept)]),
+        feature_id=np.concatenate([ids[k] for ids, k in zip(sequence.ids, kept)]).astype(np.int64),
+        uv=np.concatenate([uv[k] for uv, k in zip(sequence.uv, kept)]),
         R_cw={k: turn[k] @ R_cw[k] for k in frames},
         p_cw={k: p_cw[k] + rng.normal(0, 0.02, 3) for k in frames},
         points={int(i): sequence.points_w[i] * (1 + 0.05 * rng.standard_normal()) for i in seen},
@@ -105,6 +106,13 @@ def rolling_walk(walk):
     return _rolling_shutter(walk, HandheldRoomMotion(seed=3), LINE_DELAY_S, REFERENCE_ROW)
 
 
+@pytest.fixture(scope="module")
+def clean_rolling_walk(walk, rolling_walk):
+    """The rolling-shutter pixels without their noise: velocities a front end measures well."""
+    noise = [uv - uv_true for uv, uv_true in zip(walk.uv, walk.uv_true)]
+    return dataclasses.replace(rolling_walk, uv=[uv - n for uv, n in zip(rolling_walk.uv, noise)])
+
+
 def _inside(bounds, truth):
     return (bounds[:, 0] <= truth) & (truth <= bounds[:, 1])
 
@@ -116,8 +124,9 @@ def _inside(bounds, truth):
 def test_matches_the_scipy_adjustment_on_the_same_tracks(walk, rolling_walk, line_delay):
     """Same observations, same start, same loss family: the cameras agree within a small fraction
     of their sigma, and so do the covariances (SciPy's loss is per pixel coordinate, Ceres' per
-    observation: the weights differ slightly, so the bars are 0.1 sigma and 10 %)."""
-    tracks = _feature_tracks(rolling_walk if line_delay else walk, seed=1)
+    observation: the weights differ slightly, so the bars are 0.1 sigma and 3 %; measured 0.03 sigma
+    and 1 %)."""
+    tracks = _feature_tracks(rolling_walk if line_delay else walk, seed=1, every=4)
     scipy_result = bundle_adjust(tracks, START, PAPER_PIXEL_SIZE_MM, keyframe_step=KEYFRAME_STEP, line_delay=line_delay,
                                  reference_row=REFERENCE_ROW)
     problem, keyframe_tracks = _same_problem(tracks, line_delay)
@@ -127,9 +136,9 @@ def test_matches_the_scipy_adjustment_on_the_same_tracks(walk, rolling_walk, lin
     assert result.dropped_observations == 0
     sigma = np.sqrt(np.diag(scipy_result.covariance))
     np.testing.assert_array_less(np.abs(result.camera_params - scipy_result.camera), 0.1 * sigma)
-    np.testing.assert_allclose(np.sqrt(np.diag(result.covariance_model))[:5], sigma, rtol=0.1)
+    np.testing.assert_allclose(np.sqrt(np.diag(result.covariance_model))[:5], sigma, rtol=0.03)
     np.testing.assert_allclose(np.sqrt(np.diag(result.covariance_two_way))[:5],
-                               np.sqrt(np.diag(scipy_result.covariance_clustered)), rtol=0.1)
+                               np.sqrt(np.diag(scipy_result.covariance_clustered)), rtol=0.03)
     assert result.sigma_px == pytest.approx(scipy_result.sigma_px, rel=0.02)
     if line_delay:
         d_sigma = np.sqrt(scipy_result.covariance_globals[5, 5]) * 1e-6     # its globals are in µs/row
@@ -138,7 +147,7 @@ def test_matches_the_scipy_adjustment_on_the_same_tracks(walk, rolling_walk, lin
 
 def test_least_squares_matches_scipy_to_a_thousandth_of_sigma(walk):
     """With the robust loss out of reach (scale 1e4 px) both solve plain least squares: one minimum."""
-    tracks = _feature_tracks(walk, seed=2)
+    tracks = _feature_tracks(walk, seed=2, every=4)
     scipy_result = bundle_adjust(tracks, START, PAPER_PIXEL_SIZE_MM, keyframe_step=KEYFRAME_STEP, loss_scale_px=1e4,
                                  max_nfev=300, ftol=1e-12)
     _, keyframe_tracks = _same_problem(tracks, False)
@@ -154,16 +163,20 @@ def test_least_squares_matches_scipy_to_a_thousandth_of_sigma(walk):
 # ------------------------------------------------------------------------------- the truth
 
 
-def test_truth_inside_the_bounds_of_a_rolling_shutter_walk(rolling_walk):
-    """Tracks of a 60 µs/row shutter, velocities from the tracks: the camera and the line delay inside
-    their two-way 99 % bounds, d within 25 %; the residuals back to the simulated noise."""
+def test_truth_inside_the_bounds_of_a_rolling_shutter_walk(rolling_walk, clean_rolling_walk):
+    """Every room point tracked (60k observations) through a 60 µs/row shutter, velocities from the
+    tracks' noise-free pixels: the camera and the line delay inside their two-way 99 % bounds, d within
+    5 %; the residuals back to the simulated noise. (Velocities from the noisy pixels' two-frame
+    differences bias d low by 3 %, 4 of its sigmas here: errors in the regressor, docs/sog.md §22.)"""
     tracks = _keyframe_tracks(_feature_tracks(rolling_walk, seed=3))
-    result = adjust(tracks, _camera(START), estimate_line_delay=True)
+    velocity = _keyframe_tracks(_feature_tracks(clean_rolling_walk, seed=3)).image_velocity_px_s
+    result = adjust(dataclasses.replace(tracks, image_velocity_px_s=velocity), _camera(START),
+                    estimate_line_delay=True)
     assert result.converged, result.message
     truth = np.r_[PAPER_CAMERA.params, LINE_DELAY_S]
     assert _inside(result.bounds_99_two_way, truth).all(), (result.estimate, result.bounds_99_two_way)
-    assert abs(result.line_delay_s / LINE_DELAY_S - 1) < 0.25
-    assert result.sigma_px == pytest.approx(NOISE_PX, rel=0.15)
+    assert abs(result.line_delay_s / LINE_DELAY_S - 1) < 0.05
+    assert result.sigma_px == pytest.approx(NOISE_PX, rel=0.05)
     assert result.names == ["f", "cx", "cy", "k1", "k2", "line_delay_s"]
     # the world points: the anchored ones converted back, in front of their anchors
     assert np.isfinite(result.points_w).all()
@@ -183,10 +196,12 @@ def test_zero_line_delay_inside_its_bounds_on_a_global_shutter(walk):
 def test_a_line_delay_prior_and_held_parameters(rolling_walk):
     tracks = _keyframe_tracks(_feature_tracks(rolling_walk, seed=5))
     free = adjust(tracks, _camera(START), estimate_line_delay=True)
-    prior = adjust(tracks, _camera(START), line_delay_prior=(LINE_DELAY_S, 0.5e-6))
+    prior = adjust(tracks, _camera(START), line_delay_prior=(LINE_DELAY_S, 0.1e-6))
     assert prior.estimates_line_delay
-    assert np.sqrt(prior.covariance_model[5, 5]) < 0.5 * np.sqrt(free.covariance_model[5, 5])
-    assert abs(prior.line_delay_s - LINE_DELAY_S) < 1.5e-6
+    # the prior's information adds to the data's (its pixel sigma, 0.5 px, is about the residuals' here)
+    combined = 1 / np.sqrt(1 / free.covariance_model[5, 5] + 1 / 0.1e-6 ** 2)
+    assert np.sqrt(prior.covariance_model[5, 5]) == pytest.approx(combined, rel=0.1)
+    assert abs(prior.line_delay_s - LINE_DELAY_S) < 0.5e-6
     held = adjust(tracks, _camera(np.r_[START[0], PAPER_CAMERA.params[1:3], START[3:]]), free_params=["f", "k1", "k2"],
                   estimate_line_delay=True)
     np.testing.assert_array_equal(held.camera_params[1:3], PAPER_CAMERA.params[1:3])

@@ -56,8 +56,8 @@ inline Eigen::Vector3d WorldPointFromAnchored(const double* anchor_pose,
                                               const Eigen::Vector3d& point) {
   const Eigen::Vector3d point_c = Eigen::Vector3d(point[0], point[1], 1.0) / point[2];
   const double minus_phi[3] = {-anchor_pose[3], -anchor_pose[4], -anchor_pose[5]};
-  const Eigen::Vector3d shifted = point_c - Eigen::Vector3d(anchor_pose[0], anchor_pose[1],
-                                                            anchor_pose[2]);
+  const Eigen::Vector3d shifted =
+      point_c - Eigen::Vector3d(anchor_pose[0], anchor_pose[1], anchor_pose[2]);
   Eigen::Vector3d point_w;
   ceres::AngleAxisRotatePoint(minus_phi, shifted.data(), point_w.data());
   return point_w;

@@ -36,7 +36,7 @@ struct BaselineManifoldFunctor {
     T arc[3];
     for (int i = 0; i < 3; ++i) arc[i] = delta[0] * e0[i] + delta[1] * e1[i];
     const T angle_sq = (arc[0] * arc[0] + arc[1] * arc[1] + arc[2] * arc[2]) / (radius * radius);
-    T moved[3];  // the new unit direction from c0
+    T moved[3];                           // the new unit direction from c0
     if (ScalarValue(angle_sq) < 1e-20) {  // first order, exact derivatives at delta = 0
       for (int i = 0; i < 3; ++i) moved[i] = direction[i] + arc[i] / radius;
     } else {

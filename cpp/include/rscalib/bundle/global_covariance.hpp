@@ -32,8 +32,8 @@ struct UnknownLayout {
 // spaces of its blocks (only the first pose_size columns of a pose block are read).
 struct ObservationLinearisation {
   int point = 0;
-  int keyframe = 0;         // the observing keyframe (the cluster of the two-way covariance)
-  int pose[2] = {-1, -1};   // the keyframes whose poses the residual depends on; -1: none
+  int keyframe = 0;        // the observing keyframe (the cluster of the two-way covariance)
+  int pose[2] = {-1, -1};  // the keyframes whose poses the residual depends on; -1: none
   Eigen::Vector2d residual = Eigen::Vector2d::Zero();
   double weight = 1.0;
   Eigen::Matrix<double, 2, Eigen::Dynamic, Eigen::RowMajor, 2, kMaxGlobals> d_r_d_globals;
@@ -50,21 +50,24 @@ struct GlobalPrior {
 };
 
 struct GlobalCovariances {
-  Eigen::MatrixXd model;      // (g, g)
-  Eigen::MatrixXd by_track;   // (g, g)
-  Eigen::MatrixXd two_way;    // (g, g)
+  Eigen::MatrixXd model;           // (g, g)
+  Eigen::MatrixXd by_track;        // (g, g)
+  Eigen::MatrixXd two_way;         // (g, g)
   Eigen::MatrixXd inverse_normal;  // [H^-1]_gg (g, g)
-  Eigen::VectorXd step;       // the globals' remaining Gauss-Newton step, -[H^-1 J^T W r]_g
-  double sigma_px = 0.0;      // sqrt(sum w |r|^2 / dof)
-  int dof = 0;                // 2 N - unknowns
-  bool full_rank = true;      // false: a pseudo-inverse stood in for a singular pose or global block
-  int num_tracks = 0;         // clusters with observations
+  Eigen::VectorXd step;            // the globals' remaining Gauss-Newton step, -[H^-1 J^T W r]_g
+  double sigma_px = 0.0;           // sqrt(sum w |r|^2 / dof)
+  int dof = 0;                     // 2 N - unknowns
+  bool full_rank = true;  // false: a pseudo-inverse stood in for a singular pose or global block
+  int num_tracks = 0;     // clusters with observations
   int num_keyframes = 0;
 };
 
-// Throws InputError on inconsistent sizes or indices.
+// Throws InputError on inconsistent sizes or indices. The poses' block S_pp is factorised densely
+// (blocked Cholesky) when it is over 5 % full and has at most dense_pose_limit rows (long tracks
+// link most keyframes), else by a sparse LDL^T.
 GlobalCovariances ComputeGlobalCovariances(const UnknownLayout& layout,
                                            const std::vector<ObservationLinearisation>& obs,
-                                           const std::vector<GlobalPrior>& priors = {});
+                                           const std::vector<GlobalPrior>& priors = {},
+                                           int dense_pose_limit = 6000);
 
 }  // namespace rscalib::bundle

@@ -32,8 +32,8 @@ namespace rscalib::bundle {
 constexpr double kMicroseconds = 1e-6;  // the line delay block is in µs/row
 
 struct ReprojectionCost {
-  ReprojectionCost(camera::CameraModelType model, const double* pixel_size_mm,
-                   const double* uv_px, const double* image_velocity_px_s, double reference_row)
+  ReprojectionCost(camera::CameraModelType model, const double* pixel_size_mm, const double* uv_px,
+                   const double* image_velocity_px_s, double reference_row)
       : model_(model),
         pixel_size_mm_{pixel_size_mm[0], pixel_size_mm[1]},
         uv_px_{uv_px[0], uv_px[1]},
@@ -42,8 +42,8 @@ struct ReprojectionCost {
 
   // Observed from another keyframe than the anchor.
   template <typename T>
-  bool operator()(const T* intrinsics, const T* anchor_pose, const T* observer_pose,
-                  const T* point, const T* line_delay_us, T* residual) const {
+  bool operator()(const T* intrinsics, const T* anchor_pose, const T* observer_pose, const T* point,
+                  const T* line_delay_us, T* residual) const {
     T h[3];
     AnchoredPointInCamera(anchor_pose, observer_pose, point, h);
     return Residual(intrinsics, h, line_delay_us[0], residual);
@@ -51,8 +51,7 @@ struct ReprojectionCost {
 
   // Observed in its anchor keyframe.
   template <typename T>
-  bool operator()(const T* intrinsics, const T* point, const T* line_delay_us,
-                  T* residual) const {
+  bool operator()(const T* intrinsics, const T* point, const T* line_delay_us, T* residual) const {
     T h[3];
     AnchoredPointInAnchor(point, h);
     return Residual(intrinsics, h, line_delay_us[0], residual);
