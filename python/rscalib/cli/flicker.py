@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io.output_folder import check_output_folder, expected_output_bytes
 
     _check(args)
-    check_output_folder(args.out, expected_output_bytes(8))
+    check_output_folder(args.out, expected_output_bytes(8), inputs=[args.source])
     result = estimate_line_delay_flicker(args.source, args.frequency, rows=args.rows, roi=args.roi,
                                          max_frames=args.max_frames, method=args.method, readout=args.readout,
                                          region=args.region, progress=not args.quiet)

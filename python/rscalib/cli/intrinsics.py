@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
         if args.subpix_window < 1:
             raise InputError("--subpix-window must be at least 1")
         options = replace(options, subpix_window_px=args.subpix_window)
-    check_output_folder(args.out, expected_output_bytes(32, list(args.inputs), per_input_byte=0.1))
+    check_output_folder(args.out, expected_output_bytes(32, list(args.inputs), per_input_byte=0.1), inputs=args.inputs)
     source = args.inputs[0] if len(args.inputs) == 1 else args.inputs
     workers = bounded_workers(open_source(source), args.workers)   # frame sizes from headers, before decoding
     detections = detect_video(source, target, workers=workers, cache=not args.no_cache,

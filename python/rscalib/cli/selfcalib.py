@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     from ..selfcalib.report import write_selfcalib_outputs
 
     _check(args)
-    check_output_folder(args.out, expected_output_bytes(16))
+    check_output_folder(args.out, expected_output_bytes(16), inputs=[args.source])
     video = read_gray_frames(args.source)
     width, height = video.image_size
     if args.bank == "single":

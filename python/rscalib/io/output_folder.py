@@ -1,15 +1,22 @@
 """The output folder of a command: checked before any work starts, written as a set.
 
 - check_output_folder: --out must be a folder rscalib can create or write in, on a real file
-  system (not /proc, /sys, /dev), with room for the expected outputs; otherwise InputError (exit 2)
-  before detection or solving starts.
+  system (not /proc, /sys, /dev), with room for the expected outputs, and not an input folder;
+  otherwise InputError (exit 2) before detection or solving starts.
 - output_set: a writer writes into a hidden staging folder inside the output folder; on success the
-  files are renamed into place (same file system: each rename is atomic) with result.json last, so
-  a folder with a result.json is always one complete run. The previous run's files that the new run
-  does not write are removed, as listed in the manifest `.rscalib-outputs.json`; files rscalib did
-  not write are never touched. A failure or an interrupt removes the staging folder and leaves the
-  previous set as it was. Two runs into the same folder commit one after the other (a lock on
-  `.rscalib-lock`), so the folder holds the whole set of whichever finished last.
+  set is committed: the plan (which files move in, which of the previous run's files go) is written
+  to `.rscalib-commit.json`, then carried out with result.json last, so a folder with a result.json
+  is always one complete run. The previous run's files that the new run does not write are
+  removed, as listed in the manifest `.rscalib-outputs.json`; files rscalib did not write, and the
+  run's own inputs (a --camera file an earlier run wrote there), are never touched.
+
+What a kill leaves, at any instant: before the plan is written, the previous set, whole (the
+staging folder is removed, or by the next run if the process was killed). SIGINT, SIGTERM and
+SIGHUP during the commit (a few milliseconds of renames) wait for its end: the new set, whole, then
+the signal. SIGKILL or a power cut during the commit leaves no result.json and the plan; the next
+run into the folder (check_output_folder, output_set) or recover_output_folder finishes the new set
+from it before anything else. Two runs into the same folder commit one after the other (a lock on
+`.rscalib-lock`), so the folder holds the whole set of whichever finished last.
 """
 from __future__ import annotations
 
@@ -17,7 +24,9 @@ import contextlib
 import json
 import os
 import shutil
+import signal
 import tempfile
+import threading
 from pathlib import Path
 from typing import Iterator, Optional
 
@@ -26,6 +35,7 @@ from .results import RESULT_FILE  # the marker of a complete set
 
 MANIFEST = ".rscalib-outputs.json"
 LOCK = ".rscalib-lock"
+JOURNAL = ".rscalib-commit.json"   # the plan of a commit under way (see _commit)
 STAGING_PREFIX = ".rscalib-staging-"
 MB = 1 << 20
 
@@ -60,9 +70,11 @@ def _existing_ancestor(path: Path) -> Path:
     return Path("/")
 
 
-def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out") -> Path:
+def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out", inputs=()) -> Path:
     """InputError (one line naming the path and the reason) unless `out` is, or can be created as,
-    a writable folder with `needed_bytes` free. Creates nothing; returns the path."""
+    a writable folder with `needed_bytes` free, and is none of the `inputs` (an image folder given
+    as --out would get the outputs among its frames). Creates nothing (it finishes a commit a
+    killed run left half done: recover_output_folder); returns the path."""
     if str(out).strip() == "":
         raise InputError(f"{option} is empty: give an output folder")
     out = Path(out)
@@ -72,6 +84,9 @@ def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out")
                 else "a device or special file")
         raise InputError(f"{option} {out}: exists and is {kind}, not a folder")
     resolved = absolute.resolve()
+    for item in inputs or ():
+        if os.path.isdir(item) and _resolved(item) == resolved:
+            raise InputError(f"{option} {out}: is the input folder {item}; give the outputs a folder of their own")
     fs_type = _mount_type(resolved)
     if fs_type in _PSEUDO_FILESYSTEMS:
         raise InputError(f"{option} {out}: on the {fs_type} file system, which holds no files; give a folder on a disk")
@@ -87,6 +102,8 @@ def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out")
     if free < needed_bytes:
         raise InputError(f"{option} {out}: {free / MB:.1f} MB free on its file system, the outputs need about "
                          f"{needed_bytes / MB:.0f} MB")
+    if (resolved / JOURNAL).exists():
+        recover_output_folder(resolved)
     return out
 
 
@@ -105,33 +122,72 @@ def input_bytes(paths) -> int:
     return total
 
 
+def _plain_names(names) -> list:
+    """Plain names in the folder only: a damaged manifest or journal must not point outside it."""
+    return [n for n in names if isinstance(n, str) and n not in ("", ".", "..", MANIFEST, JOURNAL, LOCK)
+            and "/" not in n and "\\" not in n and "\0" not in n and not n.startswith(STAGING_PREFIX)]
+
+
 def _read_manifest(out: Path) -> list:
-    """The names the previous run wrote (plain names in `out` only: a damaged manifest must not
-    point outside the folder)."""
+    """The names the previous run wrote."""
     try:
         names = json.loads((out / MANIFEST).read_text()).get("files", [])
     except (OSError, ValueError, AttributeError):
         return []
-    return [n for n in names if isinstance(n, str) and n not in ("", ".", "..", MANIFEST) and "/" not in n
-            and "\\" not in n and not n.startswith(STAGING_PREFIX)]
+    return _plain_names(names) if isinstance(names, list) else []
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """`path` holds `text` whole or not at all (a temporary file, flushed to disk, renamed)."""
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    try:
+        os.write(fd, text.encode())
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    os.replace(tmp, path)
 
 
 def _write_manifest(out: Path, names) -> None:
-    tmp = out / f"{MANIFEST}.{os.getpid()}.tmp"
-    tmp.write_text(json.dumps({"written_by": "rscalib", "files": sorted(set(names))}, indent=1) + "\n")
-    os.replace(tmp, out / MANIFEST)
+    _write_atomic(out / MANIFEST, json.dumps({"written_by": "rscalib", "files": sorted(set(names))}, indent=1) + "\n")
+
+
+def _sync_folder(folder: Path) -> None:
+    """Make the renames in `folder` durable (a power cut after the commit keeps it)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def _remove(path: Path) -> None:
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path)
     elif os.path.lexists(path):
-        path.unlink()
+        os.unlink(path)
+
+
+def _journal_staging(out: Path) -> Optional[str]:
+    try:
+        return _read_journal(out).get("staging")
+    except (OSError, ValueError):
+        return None
 
 
 def _remove_dead_staging(out: Path) -> None:
-    """Staging folders of runs that were killed (their process is gone)."""
+    """Staging folders of runs that were killed (their process is gone), except one an
+    unfinished commit still needs (its journal names it)."""
+    needed = _journal_staging(out) if (out / JOURNAL).exists() else None
     for entry in out.glob(f"{STAGING_PREFIX}*"):
+        if entry.name == needed:
+            continue
         try:
             pid = int(entry.name[len(STAGING_PREFIX):].split("-")[0])
             os.kill(pid, 0)
@@ -141,30 +197,194 @@ def _remove_dead_staging(out: Path) -> None:
             continue
 
 
-def _commit(staging: Path, out: Path, last: str) -> None:
-    """Move the staged files into `out` as one set: `last` (result.json) at the end, the previous
-    run's other files removed."""
+# -- the commit ----------------------------------------------------------------------------------------
+#
+# A commit is planned in full, then the plan is written (JOURNAL: the commit point), then carried
+# out by _roll_forward. Before the journal exists the previous set is untouched; once it exists the
+# new set is decided, and anyone holding the lock can finish it from the journal (the next run into
+# the folder does, before anything else: recover_output_folder). SIGINT, SIGTERM and SIGHUP are held
+# for the milliseconds of the commit and delivered after it, so an interrupt leaves the old set or
+# the new one, whole; only SIGKILL (or a power cut) can stop a commit half-way, and then the folder
+# has no result.json until the next run or recover_output_folder finishes it.
+
+
+def _read_journal(out: Path) -> dict:
+    """The plan of the commit under way, its names checked (plain names inside `out`)."""
+    plan = json.loads((out / JOURNAL).read_text())
+    if not isinstance(plan, dict):
+        raise ValueError("not a plan")
+    staging, last = plan.get("staging"), plan.get("last")
+    if not (isinstance(staging, str) and staging.startswith(STAGING_PREFIX) and "/" not in staging
+            and "\\" not in staging and "\0" not in staging):
+        raise ValueError("not a staging folder")
+    return {"staging": staging, "new": _plain_names(plan.get("new") or []),
+            "remove": _plain_names(plan.get("remove") or []), "last": (_plain_names([last]) or [None])[0]}
+
+
+def _roll_forward(out: Path, plan: dict) -> None:
+    """Carry out a commit's plan; each step can be done again (a commit killed half-way is finished
+    by doing it all over)."""
+    staging, last = out / plan["staging"], plan["last"]
+    if last is not None and os.path.lexists(staging / last):
+        _remove(out / last)   # while the files move, the folder must not look complete
+    for name in plan["new"]:
+        source = staging / name
+        if name == last or not os.path.lexists(source):
+            continue
+        target = out / name
+        if target.is_dir() and not target.is_symlink():
+            _remove(target)   # a folder of the previous run (checked when planned)
+        os.replace(source, target)
+    for name in plan["remove"]:
+        _remove(out / name)
+    _write_manifest(out, plan["new"])
+    if last is not None and os.path.lexists(staging / last):
+        os.replace(staging / last, out / last)
+    _sync_folder(out)
+    os.unlink(out / JOURNAL)
+    shutil.rmtree(staging, ignore_errors=True)
+
+
+def _resolved(path) -> Optional[Path]:
+    try:
+        return Path(os.path.abspath(path)).resolve()
+    except (OSError, RuntimeError, ValueError):
+        return None
+
+
+def _input_paths(staging: Path, last: str, inputs) -> set:
+    """The run's input files and folders, resolved: `inputs` and those its result.json records
+    (provenance input_files), so that no command has to list them twice."""
+    paths = [p for p in inputs or ()]
+    try:
+        recorded = json.loads((staging / last).read_text()).get("provenance", {}).get("input_files", {})
+    except (OSError, ValueError, AttributeError):
+        recorded = {}
+    for records in (recorded.values() if isinstance(recorded, dict) else ()):
+        for record in records if isinstance(records, list) else [records]:
+            if isinstance(record, dict) and isinstance(record.get("path"), str):
+                paths.append(record["path"])
+    return {r for r in map(_resolved, paths) if r is not None}
+
+
+def _holds(path: Path, inputs: set) -> Optional[Path]:
+    """The input that is `path` or lies inside it, if any."""
+    here = _resolved(path)
+    if here is None:
+        return None
+    for item in inputs:
+        if item == here or here in item.parents:
+            return item
+    return None
+
+
+def _plan(staging: Path, out: Path, last: str, inputs) -> dict:
+    """What the commit will do; InputError (nothing changed) when it cannot be done: an output
+    would replace an input of the run, or a folder rscalib did not write is where an output goes."""
     previous = set(_read_manifest(out))
     new = sorted(p.name for p in staging.iterdir())
+    known = _input_paths(staging, last, inputs)
+    if _resolved(out) in known:
+        raise InputError(f"{out}: is an input folder of this run; give the outputs a folder of their own")
+    kept = set()
+    for name in sorted(previous | set(new)):
+        held = _holds(out / name, known) if os.path.lexists(out / name) else None
+        if held is None:
+            continue
+        if name in new:
+            raise InputError(f"{out / name}: the new {name} would replace {held}, an input of this run; "
+                             "give another folder")
+        kept.add(name)   # an earlier run's file this run reads: now the user's, never removed
     for name in new:
         target = out / name
         if target.is_dir() and not target.is_symlink() and name not in previous:
             raise InputError(f"{target}: a folder rscalib did not write is where an output goes; move it away")
-    _write_manifest(out, previous | set(new))   # a kill from here on still knows every file rscalib wrote
-    if last in new:
-        _remove(out / last)   # until the new set is whole, the folder must not look complete
-    for name in new:
-        if name == last:
+    return {"staging": staging.name, "new": new, "remove": sorted(previous - set(new) - kept),
+            "last": last if last in new else None}
+
+
+def _commit(staging: Path, out: Path, last: str, inputs=()) -> None:
+    """Move the staged files into `out` as one set: `last` (result.json) at the end, the previous
+    run's other files removed (not an input of this run)."""
+    plan = _plan(staging, out, last, inputs)
+    with _signals_held():
+        _write_atomic(out / JOURNAL, json.dumps(plan) + "\n")   # the commit point
+        _sync_folder(out)
+        _roll_forward(out, plan)
+
+
+def _recover(out: Path) -> bool:
+    """Finish a commit that a killed run left half done (under the lock); True if there was one."""
+    if not (out / JOURNAL).exists():
+        return False
+    try:
+        plan = _read_journal(out)
+    except (OSError, ValueError):
+        os.unlink(out / JOURNAL)   # not ours, or damaged: nothing can be finished from it
+        return False
+    if (out / plan["staging"]).is_dir():
+        with _signals_held():
+            _roll_forward(out, plan)
+    else:
+        os.unlink(out / JOURNAL)
+    return True
+
+
+def recover_output_folder(out_dir) -> bool:
+    """Finish a commit of an output set that was killed (SIGKILL, a power cut) half-way: the new
+    set is completed from its staging folder. Every run into the folder does this first; call it
+    to read a folder that a killed run left. True when there was one to finish."""
+    out = Path(out_dir)
+    if not (out / JOURNAL).exists():
+        return False
+    try:
+        with _commit_lock(out):
+            return _recover(out)
+    except OSError as error:
+        raise InputError(f"cannot finish the interrupted outputs in {out}: {error.strerror or error}") from None
+
+
+def remove_output_set(out_dir) -> None:
+    """Remove what rscalib wrote in `out_dir`: the files its manifest lists (a half-done commit
+    finished first), the manifest, staging folders of runs that are gone. The user's files stay.
+    (A batch job's folder before the job runs again: the previous answer must not be read as
+    this run's.)"""
+    out = Path(out_dir)
+    if not out.is_dir() or out.is_symlink():
+        return
+    with _commit_lock(out):
+        _recover(out)
+        for name in _read_manifest(out):
+            _remove(out / name)
+        if os.path.lexists(out / MANIFEST):
+            os.unlink(out / MANIFEST)
+    _remove_dead_staging(out)
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """SIGINT, SIGTERM and SIGHUP wait until the block is done, then are delivered (the main
+    thread only: Python runs signal handlers there; elsewhere nothing is changed)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held, previous = [], {}
+
+    def hold(signum, frame) -> None:
+        if signum not in held:
+            held.append(signum)
+
+    for signum in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+        if signum is None or signal.getsignal(signum) is None:   # a handler set outside Python: leave it
             continue
-        target = out / name
-        if target.is_dir() and not target.is_symlink():
-            _remove(target)   # a folder of the previous run (checked above)
-        os.replace(staging / name, target)
-    for name in previous - set(new):
-        _remove(out / name)
-    _write_manifest(out, new)
-    if last in new:
-        os.replace(staging / last, out / last)
+        previous[signum] = signal.signal(signum, hold)
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        for signum in held:
+            signal.raise_signal(signum)
 
 
 @contextlib.contextmanager
@@ -198,15 +418,22 @@ def _output_error(error: OSError, staging: Path, out: Path) -> InputError:
 
 
 @contextlib.contextmanager
-def output_set(out_dir, last: str = RESULT_FILE) -> Iterator[Path]:
+def output_set(out_dir, last: str = RESULT_FILE, inputs=()) -> Iterator[Path]:
     """`with output_set(out) as folder:` write every output into `folder`; on leaving, the files
     replace the previous run's set in `out` (result.json last). An error or interrupt inside
-    leaves `out` as it was; an OSError becomes InputError naming the file and the reason."""
+    leaves `out` as it was; an OSError becomes InputError naming the file and the reason.
+
+    inputs: the run's input files and folders (those its result.json records are added): an input
+    is never removed with the previous set, an output that would replace one is refused, and an
+    input folder cannot be `out`."""
     out = Path(out_dir)
     try:
         if os.path.lexists(out) and not out.is_dir():
             raise InputError(f"{out}: exists and is not a folder")
         out.mkdir(parents=True, exist_ok=True)
+        if (out / JOURNAL).exists():
+            with _commit_lock(out):
+                _recover(out)
         _remove_dead_staging(out)
         staging = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out))
     except OSError as error:
@@ -214,11 +441,12 @@ def output_set(out_dir, last: str = RESULT_FILE) -> Iterator[Path]:
     try:
         yield staging
         with _commit_lock(out):
-            _commit(staging, out, last)
+            _commit(staging, out, last, inputs)
     except OSError as error:
         raise _output_error(error, staging, out) from None
     finally:
-        shutil.rmtree(staging, ignore_errors=True)
+        if not (out / JOURNAL).exists() or _journal_staging(out) != staging.name:
+            shutil.rmtree(staging, ignore_errors=True)   # kept only for a commit left to finish
 
 
 def expected_output_bytes(base_mb: float, inputs=(), per_input_byte: float = 0.0, extra_bytes: float = 0.0) -> int:
