@@ -84,9 +84,15 @@ def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out",
                 else "a device or special file")
         raise InputError(f"{option} {out}: exists and is {kind}, not a folder")
     resolved = absolute.resolve()
+    from .video import IMAGE_EXTENSIONS
+
     for item in inputs or ():
         if os.path.isdir(item) and _resolved(item) == resolved:
             raise InputError(f"{option} {out}: is the input folder {item}; give the outputs a folder of their own")
+        if os.path.isfile(item) and Path(item).suffix.lower() in IMAGE_EXTENSIONS \
+                and _resolved(Path(item).parent) == resolved:
+            raise InputError(f"{option} {out}: holds the input image {item}; the outputs (plots are images too) "
+                             "would join the input images: give them a folder of their own")
     fs_type = _mount_type(resolved)
     if fs_type in _PSEUDO_FILESYSTEMS:
         raise InputError(f"{option} {out}: on the {fs_type} file system, which holds no files; give a folder on a disk")

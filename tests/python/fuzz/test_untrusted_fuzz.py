@@ -160,7 +160,7 @@ NASTY_SCALARS = st.one_of(
                      Raw('"]]]"'), Raw("'#not a comment'")]),
     st.none(), st.booleans(), st.integers(-10 ** 30, 10 ** 30), st.floats(allow_nan=True, allow_infinity=True),
     st.text(max_size=12))
-DEPTHS = st.sampled_from([2, 30, 63, 65, 200, 3000, 100_000])
+DEPTHS = st.sampled_from([2, 30, 63, 65, 200, 3000, 100_000, 100_000])
 
 
 def nasty(valid) -> st.SearchStrategy:
@@ -168,7 +168,7 @@ def nasty(valid) -> st.SearchStrategy:
     return st.one_of(
         NASTY_SCALARS, st.lists(NASTY_SCALARS, max_size=4),
         st.dictionaries(st.text(max_size=4), NASTY_SCALARS, max_size=3),
-        st.builds(Deep, DEPTHS, st.just(valid)),
+        st.builds(Deep, DEPTHS, st.just(valid)), st.builds(Deep, DEPTHS, st.just(valid)),
         st.builds(lambda v: [v], st.just(valid)), st.builds(lambda v: {"value": v}, st.just(valid)),
     )
 
@@ -410,3 +410,39 @@ def test_the_suites_reach_both_answers(server, folder):
             assert drawn.get((reader, "read"), 0) >= 5 and drawn[(reader, "refused")] >= 5, drawn
     for reader, name in (("camera", "camchain.yaml"), ("target", "t.yaml"), ("manifest", "m.csv")):
         assert server.read(reader, folder / name)["kind"] == "read"
+
+
+def _census(reader_server, scratch: str, reader: str, strategy, count: int, kinds, tally):
+    """Read `count` examples of `strategy`; count the answers (for the census below)."""
+    import re
+
+    @settings(max_examples=count * SCALE, **FUZZ)
+    @given(case=strategy)
+    def run(case):
+        name, text = case
+        path = Path(scratch) / name
+        path.write_text(text, encoding="utf-8")
+        answer = reader_server.read(reader, path)
+        kinds[(reader, answer["kind"])] += 1
+        if answer["kind"] not in ("read", "refused"):
+            tally[(reader, answer["kind"], re.sub(r"\d+", "N", answer["what"].replace(scratch, ""))[:100])] += 1
+
+    run()
+
+
+if __name__ == "__main__":
+    # The census of docs/reliability.md: the suites' examples (the same ones pytest draws) by answer.
+    # PYTHONPATH=python .venv/bin/python tests/python/fuzz/test_untrusted_fuzz.py
+    import collections
+
+    tally, kinds = collections.Counter(), collections.Counter()
+    with tempfile.TemporaryDirectory() as scratch:
+        reader_server = ReaderServer()
+        for family, strategy, count in (("camera", camera_files(), 150), ("target", target_files(), 100),
+                                        ("manifest", manifests(), 120)):
+            _census(reader_server, scratch, family, strategy, count, kinds, tally)
+        reader_server.close()
+    for key in sorted(kinds):
+        print(*key, kinds[key])
+    for key, n in tally.most_common():
+        print(n, *key)

@@ -222,10 +222,14 @@ def test_an_input_folder_is_not_an_output_folder(tmp_path):
     (frames / "0001.png").write_bytes(b"png")
     with pytest.raises(InputError, match="is the input folder"):
         check_output_folder(frames, inputs=[str(frames)])
+    with pytest.raises(InputError, match="holds the input image"):   # intrinsics frames/*.png --out frames
+        check_output_folder(frames, inputs=[str(frames / "0001.png")])
+    (frames / "video.avi").write_bytes(b"")   # a video beside its results is fine (simulate --out d; linedelay --out d)
+    check_output_folder(frames, inputs=[str(frames / "video.avi")])
     with pytest.raises(InputError, match="is an input folder of this run"):
         with output_set(frames, inputs=[frames]) as staged:
             (staged / "plot.png").write_text("x")
-    assert sorted(p.name for p in frames.iterdir() if not p.name.startswith(".")) == ["0001.png"]
+    assert sorted(p.name for p in frames.iterdir() if not p.name.startswith(".")) == ["0001.png", "video.avi"]
 
 
 def test_remove_output_set_keeps_the_users_files(tmp_path):
@@ -280,3 +284,29 @@ def test_linedelay_out_equal_to_its_image_folder_is_refused_before_any_work(tmp_
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1 and "is the input folder" in lines[0], done.stderr
     assert sorted(p.name for p in frames.iterdir()) == before
+
+
+if __name__ == "__main__":
+    # The census of docs/reliability.md: what the folder holds after a kill at each file operation.
+    # PYTHONPATH=python .venv/bin/python tests/python/io/test_output_kills.py
+    import tempfile
+
+    old, new = expected(OLD, "old"), expected(NEW, "new")
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+        with tempfile.TemporaryDirectory() as scratch:
+            tmp = Path(scratch)
+            steps = run_killed_at(fresh(tmp, "count"), 0, signum)[1]
+            tally: dict = {}
+            for step in range(1, steps + 1):
+                out = fresh(tmp, f"s{step}")
+                run_killed_at(out, step, signum)
+                seen = seen_with_marker(out)
+                kind = ("old whole" if seen == old else "new whole" if seen == new else
+                        "mixed, no result.json" if "result.json" not in seen else "mixed WITH result.json")
+                if kind.startswith("mixed") and (out / JOURNAL).exists():
+                    recover_output_folder(out)
+                    kind += ", new whole after the next run" if seen_with_marker(out) == new else ", still mixed"
+                if (out / "notes.txt").read_text() != "mine":
+                    kind += ", the user's file changed"
+                tally[kind] = tally.get(kind, 0) + 1
+            print(signal.Signals(signum).name, f"{steps} file operations:", tally)

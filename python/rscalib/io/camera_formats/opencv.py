@@ -28,8 +28,13 @@ _EQUIDISTANT_NAMES = ("fisheye", "equidistant", EQUIDISTANT, "kannala-brandt", "
 
 
 def _node_string(storage, key: str) -> str:
+    """The name under `key` ("" if absent); InputError naming the key for a number, list or map."""
     node = storage.getNode(key)
-    return node.string() if not node.empty() and node.isString() else ""
+    if node.empty() or node.isNone():
+        return ""
+    if not node.isString():
+        raise InputError(f"field {key} must be a name (such as {RADTAN}), not a number, list or mapping")
+    return node.string()
 
 
 def _node_number(storage, key: str):
