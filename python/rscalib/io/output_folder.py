@@ -11,12 +11,16 @@
   run's own inputs (a --camera file an earlier run wrote there), are never touched.
 
 What a kill leaves, at any instant: before the plan is written, the previous set, whole (the
-staging folder is removed, or by the next run if the process was killed). SIGINT, SIGTERM and
-SIGHUP during the commit (a few milliseconds of renames) wait for its end: the new set, whole, then
-the signal. SIGKILL or a power cut during the commit leaves no result.json and the plan; the next
-run into the folder (check_output_folder, output_set) or recover_output_folder finishes the new set
-from it before anything else. Two runs into the same folder commit one after the other (a lock on
-`.rscalib-lock`), so the folder holds the whole set of whichever finished last.
+staging folder is removed, or by the next run if the process was killed). Once it is written, the
+renames are carried out by a helper process in a session of its own (io/_commit.py, standard
+library only), holding the folder's lock, while the command waits with SIGINT, SIGTERM and SIGHUP
+held: a signal to the command or its process group, SIGKILL included, does not stop them, and the
+folder goes from the previous set to the new one, whole. If the helper cannot start or dies, the
+command finishes the renames itself. Only both killed at once (a power cut, the whole cgroup)
+leaves a commit half done: no result.json, and the plan, from which the next run into the folder
+(check_output_folder, output_set) or recover_output_folder finishes the new set before anything
+else. Two runs into the same folder commit one after the other (a lock on `.rscalib-lock`), so the
+folder holds the whole set of whichever finished last.
 """
 from __future__ import annotations
 
@@ -25,18 +29,21 @@ import json
 import os
 import shutil
 import signal
+import subprocess
+import sys
 import tempfile
 import threading
 from pathlib import Path
 from typing import Iterator, Optional
 
 from ..errors import InputError
+from . import _commit as commit_steps
+from ._commit import JOURNAL, LOCK, MANIFEST, STAGING_PREFIX, plain_names, read_journal, remove, roll_forward
 from .results import RESULT_FILE  # the marker of a complete set
 
-MANIFEST = ".rscalib-outputs.json"
-LOCK = ".rscalib-lock"
-JOURNAL = ".rscalib-commit.json"   # the plan of a commit under way (see _commit)
-STAGING_PREFIX = ".rscalib-staging-"
+__all__ = ["JOURNAL", "LOCK", "MANIFEST", "STAGING_PREFIX", "check_output_folder", "expected_output_bytes",
+           "input_bytes", "output_set", "recover_output_folder", "remove_output_set"]
+
 MB = 1 << 20
 
 # file systems that hold no results (kernel views, devices)
@@ -128,61 +135,18 @@ def input_bytes(paths) -> int:
     return total
 
 
-def _plain_names(names) -> list:
-    """Plain names in the folder only: a damaged manifest or journal must not point outside it."""
-    return [n for n in names if isinstance(n, str) and n not in ("", ".", "..", MANIFEST, JOURNAL, LOCK)
-            and "/" not in n and "\\" not in n and "\0" not in n and not n.startswith(STAGING_PREFIX)]
-
-
 def _read_manifest(out: Path) -> list:
     """The names the previous run wrote."""
     try:
         names = json.loads((out / MANIFEST).read_text()).get("files", [])
     except (OSError, ValueError, AttributeError):
         return []
-    return _plain_names(names) if isinstance(names, list) else []
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    """`path` holds `text` whole or not at all (a temporary file, flushed to disk, renamed)."""
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-    try:
-        os.write(fd, text.encode())
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-    os.replace(tmp, path)
-
-
-def _write_manifest(out: Path, names) -> None:
-    _write_atomic(out / MANIFEST, json.dumps({"written_by": "rscalib", "files": sorted(set(names))}, indent=1) + "\n")
-
-
-def _sync_folder(folder: Path) -> None:
-    """Make the renames in `folder` durable (a power cut after the commit keeps it)."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def _remove(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path)
-    elif os.path.lexists(path):
-        os.unlink(path)
+    return plain_names(names) if isinstance(names, list) else []
 
 
 def _journal_staging(out: Path) -> Optional[str]:
     try:
-        return _read_journal(out).get("staging")
+        return read_journal(out).get("staging")
     except (OSError, ValueError):
         return None
 
@@ -212,43 +176,6 @@ def _remove_dead_staging(out: Path) -> None:
 # for the milliseconds of the commit and delivered after it, so an interrupt leaves the old set or
 # the new one, whole; only SIGKILL (or a power cut) can stop a commit half-way, and then the folder
 # has no result.json until the next run or recover_output_folder finishes it.
-
-
-def _read_journal(out: Path) -> dict:
-    """The plan of the commit under way, its names checked (plain names inside `out`)."""
-    plan = json.loads((out / JOURNAL).read_text())
-    if not isinstance(plan, dict):
-        raise ValueError("not a plan")
-    staging, last = plan.get("staging"), plan.get("last")
-    if not (isinstance(staging, str) and staging.startswith(STAGING_PREFIX) and "/" not in staging
-            and "\\" not in staging and "\0" not in staging):
-        raise ValueError("not a staging folder")
-    return {"staging": staging, "new": _plain_names(plan.get("new") or []),
-            "remove": _plain_names(plan.get("remove") or []), "last": (_plain_names([last]) or [None])[0]}
-
-
-def _roll_forward(out: Path, plan: dict) -> None:
-    """Carry out a commit's plan; each step can be done again (a commit killed half-way is finished
-    by doing it all over)."""
-    staging, last = out / plan["staging"], plan["last"]
-    if last is not None and os.path.lexists(staging / last):
-        _remove(out / last)   # while the files move, the folder must not look complete
-    for name in plan["new"]:
-        source = staging / name
-        if name == last or not os.path.lexists(source):
-            continue
-        target = out / name
-        if target.is_dir() and not target.is_symlink():
-            _remove(target)   # a folder of the previous run (checked when planned)
-        os.replace(source, target)
-    for name in plan["remove"]:
-        _remove(out / name)
-    _write_manifest(out, plan["new"])
-    if last is not None and os.path.lexists(staging / last):
-        os.replace(staging / last, out / last)
-    _sync_folder(out)
-    os.unlink(out / JOURNAL)
-    shutil.rmtree(staging, ignore_errors=True)
 
 
 def _resolved(path) -> Optional[Path]:
@@ -309,14 +236,38 @@ def _plan(staging: Path, out: Path, last: str, inputs) -> dict:
             "last": last if last in new else None}
 
 
-def _commit(staging: Path, out: Path, last: str, inputs=()) -> None:
+def _commit(staging: Path, out: Path, last: str, inputs=(), lock_fd: Optional[int] = None) -> None:
     """Move the staged files into `out` as one set: `last` (result.json) at the end, the previous
-    run's other files removed (not an input of this run)."""
+    run's other files removed (not an input of this run). The plan is written first, then carried
+    out by a helper process (_finish)."""
     plan = _plan(staging, out, last, inputs)
     with _signals_held():
-        _write_atomic(out / JOURNAL, json.dumps(plan) + "\n")   # the commit point
-        _sync_folder(out)
-        _roll_forward(out, plan)
+        commit_steps.write_atomic(out / JOURNAL, json.dumps(plan) + "\n")   # the commit point
+        commit_steps.sync_folder(out)
+        _finish(out, plan, lock_fd)
+
+
+def _helper_argv(out: Path) -> list:
+    """The command line of the process that carries a commit out (a test may wrap it)."""
+    return [sys.executable, "-I", "-S", commit_steps.__file__, str(out)]
+
+
+def _finish(out: Path, plan: dict, lock_fd: Optional[int]) -> None:
+    """Carry out a written plan in a process of its own session, holding the folder's lock (it
+    inherits `lock_fd`): a signal to this process or its process group, even SIGKILL, does not stop
+    it half-way. If it cannot start, or fails, or is killed, this process finishes the plan itself."""
+    helper = None
+    if os.name == "posix" and lock_fd is not None and sys.executable:
+        try:
+            helper = subprocess.Popen(_helper_argv(out), start_new_session=True, pass_fds=(lock_fd,),
+                                      stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        except OSError:
+            helper = None
+    if helper is not None:
+        _, error = helper.communicate()
+        if helper.returncode == 0 and not (out / JOURNAL).exists():
+            return
+    roll_forward(out, plan)   # no helper, or it failed (the same error comes again, as an OSError)
 
 
 def _recover(out: Path) -> bool:
@@ -324,13 +275,13 @@ def _recover(out: Path) -> bool:
     if not (out / JOURNAL).exists():
         return False
     try:
-        plan = _read_journal(out)
+        plan = read_journal(out)
     except (OSError, ValueError):
         os.unlink(out / JOURNAL)   # not ours, or damaged: nothing can be finished from it
         return False
     if (out / plan["staging"]).is_dir():
         with _signals_held():
-            _roll_forward(out, plan)
+            roll_forward(out, plan)
     else:
         os.unlink(out / JOURNAL)
     return True
@@ -361,7 +312,7 @@ def remove_output_set(out_dir) -> None:
     with _commit_lock(out):
         _recover(out)
         for name in _read_manifest(out):
-            _remove(out / name)
+            remove(out / name)
         if os.path.lexists(out / MANIFEST):
             os.unlink(out / MANIFEST)
     _remove_dead_staging(out)
@@ -394,18 +345,19 @@ def _signals_held() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _commit_lock(out: Path) -> Iterator[None]:
+def _commit_lock(out: Path) -> Iterator[Optional[int]]:
     """Held while a set is moved into `out`: two runs writing the same folder at once would
-    otherwise interleave their files (flock: released by the kernel if the process dies)."""
+    otherwise interleave their files (flock: released by the kernel when every process holding it,
+    the commit's helper included, has ended). Yields the lock's file descriptor."""
     try:
         import fcntl
     except ImportError:  # not POSIX: no lock
-        yield
+        yield None
         return
     with open(out / LOCK, "a") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         try:
-            yield
+            yield handle.fileno()
         finally:
             fcntl.flock(handle, fcntl.LOCK_UN)
 
@@ -446,8 +398,8 @@ def output_set(out_dir, last: str = RESULT_FILE, inputs=()) -> Iterator[Path]:
         raise InputError(f"cannot write in {out}: {error.strerror or error}") from None
     try:
         yield staging
-        with _commit_lock(out):
-            _commit(staging, out, last, inputs)
+        with _commit_lock(out) as lock_fd:
+            _commit(staging, out, last, inputs, lock_fd)
     except OSError as error:
         raise _output_error(error, staging, out) from None
     finally:

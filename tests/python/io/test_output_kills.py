@@ -1,13 +1,19 @@
 """The output set against a kill at every instant, and against a run whose inputs live in its
 --out (issue 33).
 
-The kill test forks a child per file operation of a run that replaces a previous set: the child
-counts its file operations (os.replace, unlink, rmdir, mkdir, open, write, fsync) and sends itself
-SIGINT, SIGTERM or SIGKILL at the k-th; then the folder is checked. SIGINT and SIGTERM must leave the
-previous set or the new one, whole, as they are; SIGKILL can stop the few milliseconds of renames
-half-way, and then the folder must show no result.json until the next run (or
-recover_output_folder) completes the new set from what the killed run left. The user's file in the
-folder is never touched.
+The kill test forks a child per file operation of a run that replaces a previous set. The commit
+runs in two processes (the command, then the helper that carries the plan out, io/_commit.py);
+both count their file operations (os.replace, unlink, rmdir, mkdir, open, write, fsync) in one
+counter, and at the k-th one a signal is sent:
+
+- to the command (SIGINT, SIGTERM, SIGKILL): the folder must hold the previous set or the new one,
+  whole, as it is (the helper, in a session of its own, finishes the renames);
+- to the helper alone (SIGKILL): the command finishes the renames itself: old or new, whole;
+- to both (SIGKILL: a power cut, or the whole cgroup killed): the renames may stop half-way; then
+  the folder shows no result.json, and the next run (or recover_output_folder) completes the new
+  set from the plan before anything else.
+
+The user's file in the folder is never touched.
 """
 from __future__ import annotations
 
@@ -16,6 +22,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -71,27 +78,63 @@ def seen_with_marker(out: Path) -> dict:
     return seen
 
 
-def run_killed_at(out: Path, step: int, signum: int) -> tuple:
-    """Fork; the child replaces the set in `out` and signals itself at its `step`-th file operation.
-    Returns (the child's exit status, the operations it counted)."""
+# Run as the commit's helper instead of _commit.py: the same file, with its file operations counted in
+# the shared counter and the signal sent at the chosen one (to the command, to itself, or to both).
+HELPER_WRAPPER = """
+import os, runpy, signal, sys, time
+counter, step, signum, target = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+open(counter + ".helper", "w").write(str(os.getpid()))
+def counted(function):
+    def wrapper(*args, **kwargs):
+        n = int(open(counter).read() or 0) + 1
+        open(counter, "w").write(str(n))
+        if n == step:
+            if target in ("command", "both"):
+                os.kill(os.getppid(), signum)
+                time.sleep(0.05)   # the command is gone (or holds the signal) before the next step
+            if target in ("helper", "both"):
+                os.kill(os.getpid(), signum)
+        return function(*args, **kwargs)
+    return wrapper
+for name in COUNTED:
+    setattr(os, name, counted(getattr(os, name)))
+sys.argv = sys.argv[5:]
+runpy.run_path(sys.argv[0], run_name="__main__")
+""".replace("COUNTED", repr(COUNTED))
+
+
+def _gone(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(") ")[-1].startswith(("Z", "X"))
+    except OSError:
+        return True
+
+
+def run_killed_at(out: Path, step: int, signum: int, target: str = "command") -> tuple:
+    """Fork; the child (the command) replaces the set in `out`; at the `step`-th file operation of
+    the command and its helper, `signum` goes to `target` (command, helper, both). Waits for both.
+    Returns (the command's exit status, the operations counted)."""
     counter = out.parent / f"{out.name}.operations"
+    counter.write_text("0")
+    (out.parent / f"{out.name}.operations.helper").unlink(missing_ok=True)
     pid = os.fork()
-    if pid == 0:   # the child: nothing here may return into pytest
+    if pid == 0:   # the command: nothing here may return into pytest
         status = 0
         try:
-            count = [0]
-
             def counted(function):
                 def wrapper(*args, **kwargs):
-                    count[0] += 1
-                    counter.write_text(str(count[0])) if step == 0 else None
-                    if count[0] == step:
+                    n = int(counter.read_text() or 0) + 1
+                    counter.write_text(str(n))
+                    if n == step and target in ("command", "both"):
                         os.kill(os.getpid(), signum)
                     return function(*args, **kwargs)
                 return wrapper
 
             # the CLI's SIGTERM handler (cli._sigterm_raises): a Python exception, not the default death
             signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(SystemExit(143)))
+            output_folder._helper_argv = lambda folder: [sys.executable, "-I", "-S", "-c", HELPER_WRAPPER, str(counter),
+                                                         str(step), str(int(signum)), target,
+                                                         output_folder.commit_steps.__file__, str(folder)]
             for name in COUNTED:
                 setattr(os, name, counted(getattr(os, name)))
             write_set(out, NEW, "new")
@@ -103,8 +146,14 @@ def run_killed_at(out: Path, step: int, signum: int) -> tuple:
             status = 1
         os._exit(status)
     _, status = os.waitpid(pid, 0)
-    steps = int(counter.read_text()) if step == 0 else None
-    return os.waitstatus_to_exitcode(status), steps
+    helper = out.parent / f"{out.name}.operations.helper"
+    if helper.exists():   # a helper orphaned by the kill finishes on its own: wait for it
+        helper_pid = int(helper.read_text())
+        for _ in range(600):
+            if _gone(helper_pid):
+                break
+            time.sleep(0.05)
+    return os.waitstatus_to_exitcode(status), int(counter.read_text())
 
 
 def fresh(tmp_path: Path, name: str) -> Path:
@@ -114,16 +163,19 @@ def fresh(tmp_path: Path, name: str) -> Path:
     return out
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL],
-                         ids=["SIGINT", "SIGTERM", "SIGKILL"])
-def test_a_kill_at_every_file_operation_leaves_the_old_set_or_the_new_one_whole(tmp_path, signum):
+KILLS = [("command", signal.SIGINT), ("command", signal.SIGTERM), ("command", signal.SIGKILL),
+         ("helper", signal.SIGKILL), ("both", signal.SIGKILL)]
+
+
+@pytest.mark.parametrize("target, signum", KILLS, ids=[f"{signal.Signals(s).name} to the {t}" for t, s in KILLS])
+def test_a_kill_at_every_file_operation_leaves_the_old_set_or_the_new_one_whole(tmp_path, target, signum):
     old, new = expected(OLD, "old"), expected(NEW, "new")
     code, steps = run_killed_at(fresh(tmp_path, "count-run"), 0, signum)
     assert code == 0 and steps > 20, (code, steps)
     outcomes = {"old": 0, "new": 0, "finished by the next run": 0}
     for step in range(1, steps + 1):
         out = fresh(tmp_path, f"k{step}")
-        code, _ = run_killed_at(out, step, signum)
+        run_killed_at(out, step, signum, target)
         seen = seen_with_marker(out)
         assert (out / "notes.txt").read_text() == "mine", step
         if seen == old:
@@ -131,8 +183,8 @@ def test_a_kill_at_every_file_operation_leaves_the_old_set_or_the_new_one_whole(
         elif seen == new:
             outcomes["new"] += 1
         else:
-            # only SIGKILL can stop the commit between its first and last rename: then no result.json
-            assert signum == signal.SIGKILL, (step, seen)
+            # only killing the helper and the command at once stops the renames half-way: no result.json
+            assert target == "both", (step, seen)
             assert "result.json" not in seen and (out / JOURNAL).exists(), (step, seen)
             assert recover_output_folder(out)
             assert seen_with_marker(out) == new, step
@@ -142,27 +194,24 @@ def test_a_kill_at_every_file_operation_leaves_the_old_set_or_the_new_one_whole(
         assert seen_with_marker(out) == {"c.txt": "third c", "result.json": "third"}, step
         assert (out / "notes.txt").read_text() == "mine"
         assert not [p for p in out.iterdir() if p.name.startswith(".rscalib-staging")], step
-    assert outcomes["old"] > 0 and outcomes["new"] > 0, outcomes
-    if signum != signal.SIGKILL:   # a held signal arrives after the commit: the new set is whole
-        assert outcomes["finished by the next run"] == 0
+    assert outcomes["new"] > 0 and (outcomes["old"] > 0 or target == "helper"), outcomes   # the helper: after the plan
+    if target != "both":
+        assert outcomes["finished by the next run"] == 0, outcomes
 
 
 def test_sigint_during_the_commit_is_delivered_after_it(tmp_path, monkeypatch):
-    """In one process: Ctrl-C while the files move in raises KeyboardInterrupt only once the new set
-    is whole."""
+    """In one process: Ctrl-C while the files move in (here: as the helper starts) raises
+    KeyboardInterrupt only once the new set is whole."""
     out = fresh(tmp_path, "out")
-    real, moves = os.replace, []
+    finish = output_folder._finish
 
-    def replace(source, target):
-        moves.append(Path(target).name)
-        if len(moves) == 3:
-            os.kill(os.getpid(), signal.SIGINT)
-        return real(source, target)
+    def interrupted(*args):
+        os.kill(os.getpid(), signal.SIGINT)
+        return finish(*args)
 
-    monkeypatch.setattr(output_folder.os, "replace", replace)
+    monkeypatch.setattr(output_folder, "_finish", interrupted)
     with pytest.raises(KeyboardInterrupt):
         write_set(out, NEW, "new")
-    monkeypatch.setattr(output_folder.os, "replace", real)
     assert seen_with_marker(out) == expected(NEW, "new")
     assert not (out / JOURNAL).exists()
 
@@ -170,9 +219,9 @@ def test_sigint_during_the_commit_is_delivered_after_it(tmp_path, monkeypatch):
 def test_the_next_run_finishes_a_commit_a_kill_left_before_it_does_anything(tmp_path):
     out = fresh(tmp_path, "out")
     steps = run_killed_at(fresh(tmp_path, "count"), 0, signal.SIGKILL)[1]
-    for step in range(1, steps + 1):   # the first step that leaves a commit half done
+    for step in range(1, steps + 1):   # the first step that leaves a commit half done (a power cut)
         out = fresh(tmp_path, f"s{step}")
-        run_killed_at(out, step, signal.SIGKILL)
+        run_killed_at(out, step, signal.SIGKILL, "both")
         if (out / JOURNAL).exists() and "result.json" not in visible(out):
             break
     else:
@@ -292,14 +341,14 @@ if __name__ == "__main__":
     import tempfile
 
     old, new = expected(OLD, "old"), expected(NEW, "new")
-    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+    for target, signum in KILLS:
         with tempfile.TemporaryDirectory() as scratch:
             tmp = Path(scratch)
             steps = run_killed_at(fresh(tmp, "count"), 0, signum)[1]
             tally: dict = {}
             for step in range(1, steps + 1):
                 out = fresh(tmp, f"s{step}")
-                run_killed_at(out, step, signum)
+                run_killed_at(out, step, signum, target)
                 seen = seen_with_marker(out)
                 kind = ("old whole" if seen == old else "new whole" if seen == new else
                         "mixed, no result.json" if "result.json" not in seen else "mixed WITH result.json")
@@ -309,4 +358,5 @@ if __name__ == "__main__":
                 if (out / "notes.txt").read_text() != "mine":
                     kind += ", the user's file changed"
                 tally[kind] = tally.get(kind, 0) + 1
-            print(signal.Signals(signum).name, f"{steps} file operations:", tally)
+            print(f"{signal.Signals(signum).name} to", "both" if target == "both" else f"the {target}",
+                  f"({steps} file operations):", tally)
