@@ -35,6 +35,8 @@ DETECTION_COMMANDS = ("linedelay", "intrinsics")
 _ID_CHARS = re.compile(r"[^A-Za-z0-9._-]+")
 # 10 000 jobs of a few hundred bytes each are a few MB; a larger file is refused before it is read.
 MANIFEST_MAX_BYTES = 64 * 2 ** 20
+# YAML is read by pure Python (seconds per MB): a YAML manifest of ~20 000 jobs; larger ones as CSV.
+MANIFEST_YAML_MAX_BYTES = 4 * 2 ** 20
 
 
 @dataclass(frozen=True)
@@ -129,7 +131,7 @@ def _csv_rows(path: Path) -> list:
 
 def _yaml_rows(path: Path) -> list:
     # aliases are allowed (a manifest may share values with &name / *name), within a size budget
-    data = load_yaml(_text(path), path, aliases=True)
+    data = load_yaml(_text(path), path, aliases=True, max_bytes=MANIFEST_YAML_MAX_BYTES)
     defaults = {}
     if isinstance(data, dict):
         defaults = data.get("defaults") or {}

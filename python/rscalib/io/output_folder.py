@@ -169,13 +169,11 @@ def _remove_dead_staging(out: Path) -> None:
 
 # -- the commit ----------------------------------------------------------------------------------------
 #
-# A commit is planned in full, then the plan is written (JOURNAL: the commit point), then carried
-# out by _roll_forward. Before the journal exists the previous set is untouched; once it exists the
-# new set is decided, and anyone holding the lock can finish it from the journal (the next run into
-# the folder does, before anything else: recover_output_folder). SIGINT, SIGTERM and SIGHUP are held
-# for the milliseconds of the commit and delivered after it, so an interrupt leaves the old set or
-# the new one, whole; only SIGKILL (or a power cut) can stop a commit half-way, and then the folder
-# has no result.json until the next run or recover_output_folder finishes it.
+# A commit is planned in full (_plan), then the plan is written (JOURNAL: the commit point), then
+# carried out by a helper process (_finish; _commit.roll_forward). Before the journal exists the
+# previous set is untouched; once it exists the new set is decided, and whoever holds the lock can
+# finish it from the journal (the next run into the folder does, before anything else:
+# recover_output_folder). The module docstring says what a kill leaves at each instant.
 
 
 def _resolved(path) -> Optional[Path]:

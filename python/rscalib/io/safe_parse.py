@@ -33,7 +33,7 @@ import yaml
 
 from ..errors import InputError
 
-__all__ = ["MAX_NESTING", "MAX_INT_DIGITS", "MAX_YAML_NODES", "read_text", "load_yaml", "load_json",
+__all__ = ["MAX_NESTING", "MAX_INT_DIGITS", "MAX_YAML_NODES", "YAML_MAX_BYTES", "read_text", "load_yaml", "load_json",
            "load_python_literal", "check_nesting", "nesting_depth", "one_line", "shown"]
 
 # Real camera, target and manifest files nest fewer than 10 levels; 64 leaves room and stays far
@@ -45,6 +45,9 @@ MAX_INT_DIGITS = 100
 # Nodes a YAML document may expand to once its aliases are followed (a manifest of 10 000 jobs of
 # 20 fields is 4*10^5): the bound on "billion laughs".
 MAX_YAML_NODES = 2_000_000
+# PyYAML's safe loader is pure Python (the C one cannot be limited from outside): a few hundred kB a
+# second, and ~80 bytes of memory per byte read. Camera and target files in YAML are a few kB.
+YAML_MAX_BYTES = 1 << 20
 
 
 def shown(path) -> str:
@@ -255,10 +258,15 @@ class _BoundedLoader(yaml.reader.Reader, yaml.scanner.Scanner, yaml.parser.Parse
 
 
 def load_yaml(text: str, where, *, aliases: bool = False, max_depth: int = MAX_NESTING,
-              max_nodes: int = MAX_YAML_NODES) -> Any:
+              max_nodes: int = MAX_YAML_NODES, max_bytes: int = YAML_MAX_BYTES) -> Any:
     """One YAML document, as yaml.safe_load reads it, within the limits above; InputError naming
     `where` (and the line) for a syntax error, too deep a nesting, an alias (aliases=False) or
-    aliases expanding to more than max_nodes values, an integer of more than MAX_INT_DIGITS digits."""
+    aliases expanding to more than max_nodes values, an integer of more than MAX_INT_DIGITS digits,
+    more than max_bytes of text (parsing YAML takes seconds per MB)."""
+    size = len(text.encode("utf-8", "replace")) if len(text) * 4 > max_bytes else len(text)
+    if size > max_bytes:
+        raise InputError(f"{shown(where)}: {_format_bytes(size)} of YAML, more than the {_format_bytes(max_bytes)} "
+                         "such a file can be")
     loader = None
     try:
         loader = _BoundedLoader(text, where, aliases, max_depth, max_nodes)   # checks the characters

@@ -51,7 +51,7 @@ MIN_LENGTH_M, MAX_LENGTH_M = 1e-5, 100.0
 MAX_GRID_SIDE = 1000
 MAX_TARGET_POINTS = 10_000
 # A target file is a few hundred bytes; a larger one is refused from its size before it is read.
-TARGET_FILE_MAX_BYTES = 1 << 20
+TARGET_FILE_MAX_BYTES = 64 << 10
 
 # Kalibr draws its tags with a 2-bit black border (OpenCV's default is 1 bit).
 APRILGRID_BORDER_BITS = 2

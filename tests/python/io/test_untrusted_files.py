@@ -12,6 +12,7 @@ import json
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
@@ -94,7 +95,8 @@ def test_a_deeply_nested_camera_file_is_refused_not_a_crash(tmp_path, name, text
 
 
 def test_a_deeply_nested_target_and_manifest_are_refused(tmp_path):
-    (tmp_path / "t.yaml").write_text("target_type: " + "[" * DEEP + "]" * DEEP + "\n")
+    deep = 20_000   # a target file is at most 64 KiB; 20 000 levels are 20 times Python's recursion limit
+    (tmp_path / "t.yaml").write_text("target_type: " + "[" * deep + "]" * deep + "\n")
     refused_in_child("load_target", tmp_path / "t.yaml", "nested more than")
     (tmp_path / "m.yaml").write_text("jobs: " + "[" * DEEP + "]" * DEEP + "\n")
     refused_in_child("load_manifest", tmp_path / "m.yaml", "nested more than")
@@ -164,6 +166,15 @@ def test_a_1_gb_sparse_file_is_refused_from_its_size_without_reading_it(tmp_path
     message, grown_mb = done.stdout.strip().splitlines()
     assert "1024.0 MiB, more than" in message and str(path) in message
     assert int(grown_mb) < 50   # nothing of the gigabyte was read
+
+
+def test_a_large_yaml_camera_file_is_refused_at_once_not_parsed_for_minutes(tmp_path):
+    """15 MB of YAML took PyYAML's pure-Python loader 335 s (and 1.2 GB) on this machine."""
+    path = tmp_path / "camchain.yaml"
+    path.write_text(yaml.safe_dump(KALIBR) + "  extra: [" + ", ".join(["1.2345678"] * 300_000) + "]\n")
+    started = time.monotonic()
+    refused_in_child("load_camera", path, "of YAML, more than the 1.0 MiB", timeout_s=60)
+    assert time.monotonic() - started < 60
 
 
 def test_a_fifo_or_device_is_read_at_most_to_the_cap(tmp_path):
