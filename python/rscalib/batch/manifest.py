@@ -20,6 +20,7 @@ import re
 import shlex
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable, Optional
 
 from ..errors import InputError
 from ..io.safe_parse import load_yaml, one_line, read_text
@@ -59,15 +60,18 @@ class Job:
         return hashlib.sha256(text.encode()).hexdigest()
 
 
-def load_manifest(path) -> list:
-    """Jobs of a CSV or YAML manifest; InputError naming the file, row and field on any problem."""
+def load_manifest(path, parse_args: Optional[Callable[[list], object]] = None) -> list:
+    """Jobs of a CSV or YAML manifest; InputError naming the file, row and field on any problem.
+    parse_args: the commands' argument parser (argparse's parse_args of `rscalib`); with it every row
+    is checked as the command would check it (`rscalib batch` passes the CLI's; batch never imports
+    cli), without it only the manifest's own fields are."""
     try:
-        return _load_manifest(Path(path))
+        return _load_manifest(Path(path), parse_args)
     except InputError as error:
         raise InputError(one_line(str(error))) from None
 
 
-def _load_manifest(path: Path) -> list:
+def _load_manifest(path: Path, parse_args) -> list:
     if not path.is_file():
         raise InputError(f"manifest not found: {path}")
     suffix = path.suffix.lower()
@@ -81,7 +85,7 @@ def _load_manifest(path: Path) -> list:
         raise InputError(f"{path}: no jobs")
     jobs, seen = [], {}
     for number, (where, fields) in enumerate(rows, start=1):
-        job = _job(path, number, where, fields)
+        job = _job(path, number, where, fields, parse_args)
         if job.id in seen:
             raise InputError(f"{path}: {where}: field 'id': '{job.id}' is also the id of row {seen[job.id]}"
                              + ("" if "id" in fields else " (give each row an id)"))
@@ -175,7 +179,7 @@ def _option_args(flag: str, value, is_path: bool, base: Path) -> list:
     return [flag, str(value)]
 
 
-def _job(path: Path, number: int, where: str, fields: dict) -> Job:
+def _job(path: Path, number: int, where: str, fields: dict, parse_args) -> Job:
     base = path.parent
 
     def bad(field: str, message: str) -> InputError:
@@ -217,7 +221,8 @@ def _job(path: Path, number: int, where: str, fields: dict) -> Job:
     if command in DETECTION_COMMANDS and "--workers" not in argv:
         argv += ["--workers", "1"]
     argv.append("--quiet")
-    _check_with_parser(argv, bad)
+    if parse_args is not None:
+        _check_with_parser(argv, bad, parse_args)
     job_id = str(fields.get("id") or "").strip()
     if job_id:
         if _ID_CHARS.search(job_id) or job_id.startswith("."):
@@ -230,14 +235,12 @@ def _job(path: Path, number: int, where: str, fields: dict) -> Job:
     return Job(job_id, number, command, mode, tuple(input_paths), tuple(argv))
 
 
-def _check_with_parser(argv: list, bad) -> None:
+def _check_with_parser(argv: list, bad, parse_args: Callable[[list], object]) -> None:
     """Parse the row with the command's own parser; its complaint becomes one line naming the field."""
-    from ..cli import build_parser
-
     messages = io.StringIO()
     try:
         with contextlib.redirect_stderr(messages), contextlib.redirect_stdout(io.StringIO()):
-            build_parser().parse_args([*argv, "--out", "."])
+            parse_args([*argv, "--out", "."])
     except SystemExit:
         text = messages.getvalue().strip().splitlines()
         message = text[-1].split("error: ", 1)[-1] if text else "not accepted by the command"

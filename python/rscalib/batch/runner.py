@@ -32,13 +32,16 @@ from .._version import __version__
 from ..errors import InputError
 from ..io.output_folder import remove_output_set
 from ..io.safe_parse import one_line, shown
-from .child import PARENT_PID_ENV
 from .manifest import load_manifest
 from .outcome import read_outcome
 from .store import ANSWERED, LOST, QUEUED, STORE_FILE, ResultStore, check_store, driver_lock, utc_now
 from .summary import INDEX_FILE, PLOT_FILE, write_index
 
 EVENT_TOPIC = "rscalib-batch"
+# The job process (rscalib.cli.job, started by its module name: batch never imports cli) dies with the
+# worker thread whose process id this names.
+JOB_MODULE = "rscalib.cli.job"
+PARENT_PID_ENV = "RSCALIB_BATCH_PARENT_PID"
 JOBS_DIR, LOGS_DIR = "jobs", "logs"
 # A job's own threads: the jobs are the parallelism (workers x threads-per-worker at once), so each
 # job's BLAS/OpenMP/OpenCV pools get one thread (OpenCV's matters for more than speed: with several
@@ -170,7 +173,7 @@ def run_job(task: dict) -> dict:
     with open(log_path, "w") as log:
         log.write(f"$ rscalib {shlex.join(argv)}\n")
         log.flush()
-        process = subprocess.Popen([sys.executable, "-m", "rscalib.batch.child", *argv], stdout=log,
+        process = subprocess.Popen([sys.executable, "-m", JOB_MODULE, *argv], stdout=log,
                                    stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env)
     if worker is not None:
         worker.log_event(EVENT_TOPIC, {"id": task["id"], "pid": process.pid, "worker": where,
@@ -300,13 +303,14 @@ def plan(jobs: list, store: ResultStore, version: str) -> tuple:
 
 def run_batch(manifest, out_dir, *, resume: bool = False, workers: int = 2, threads_per_worker: int = 1,
               memory_limit="auto", scheduler: Optional[str] = None, timeout_s: Optional[float] = None,
-              say: Callable[[str], None] = print) -> dict:
+              say: Callable[[str], None] = print, parse_args: Optional[Callable[[list], object]] = None) -> dict:
     """Run every job of `manifest` not already answered in `out_dir`; returns {status: count} over the
     manifest's jobs, and writes DIR/index.html. One driver at a time (store.driver_lock). InputError,
     before anything is written, for a bad manifest or --scheduler, an existing batch without
     `resume`, a results store that is not rscalib's (left untouched), another driver running the
-    batch, a file of the user's where the batch writes, no Dask."""
-    jobs = load_manifest(manifest)
+    batch, a file of the user's where the batch writes, no Dask. parse_args: the commands' parser
+    (load_manifest checks every row with it; `rscalib batch` passes the CLI's)."""
+    jobs = load_manifest(manifest, parse_args=parse_args)
     distributed = require_dask()
     if scheduler:
         check_scheduler_address(scheduler)

@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     counts = run_batch(args.manifest, args.out, resume=args.resume, workers=args.workers,
                        threads_per_worker=args.threads_per_worker, memory_limit=_memory_limit(args.memory_limit),
                        scheduler=args.scheduler, timeout_s=args.job_timeout,
-                       say=lambda line: print(line, file=sys.stderr))
+                       say=lambda line: print(line, file=sys.stderr), parse_args=args.parse_args)
     print(summary_line(counts))
     print(f"summary: {Path(args.out) / INDEX_FILE}")
     return EXIT_OK if all(status in ANSWERED for status in counts) else EXIT_INTERNAL

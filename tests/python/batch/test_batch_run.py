@@ -121,7 +121,7 @@ def job_processes(out: Path) -> list:
             text = cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace")
         except OSError:
             continue
-        if "rscalib.batch.child" in text and str(out) in text:
+        if "rscalib.cli.job" in text and str(out) in text:
             found.append(text)
     return found
 

@@ -1,6 +1,7 @@
-"""The job process: `python -m rscalib.batch.child COMMAND ARGS...` is `rscalib COMMAND ARGS...` (the same
-rscalib.cli.main) that also dies with the worker that started it, so a killed batch leaves no
-orphan jobs writing into a folder that `--resume` is about to run again."""
+"""A batch job's process: `python -m rscalib.cli.job COMMAND ARGS...` is `rscalib COMMAND ARGS...` (the
+same rscalib.cli.main) that also dies with the worker that started it, so a killed batch leaves no
+orphan jobs writing into a folder that `--resume` is about to run again. The batch runner starts it
+by its module name (batch/runner.py), so batch never imports cli."""
 from __future__ import annotations
 
 import ctypes
@@ -8,7 +9,8 @@ import os
 import signal
 import sys
 
-PARENT_PID_ENV = "RSCALIB_BATCH_PARENT_PID"
+from ..batch.runner import PARENT_PID_ENV
+
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
@@ -25,7 +27,7 @@ def die_with_parent() -> None:
 
 def main(argv: list) -> int:
     die_with_parent()
-    from ..cli import main as cli_main
+    from . import main as cli_main
 
     return cli_main(argv)
 
