@@ -191,6 +191,9 @@ def test_zero_line_delay_inside_its_bounds_on_a_global_shutter(walk):
     held = adjust(tracks, _camera(START))
     assert held.line_delay_s == 0.0 and not held.covariance_two_way[5].any()
     assert _inside(held.bounds_99_two_way[:5], PAPER_CAMERA.params).all()
+    # the arrays are the caller's (the binding's are read-only views into the C++ result)
+    for array in (held.keyframe_poses, held.points_anchored, held.covariance_two_way, held.residuals_px, held.inlier):
+        assert array.flags.writeable
 
 
 def test_a_line_delay_prior_and_held_parameters(rolling_walk):
