@@ -6,6 +6,7 @@ Oracles: the simulated truth (rscalib.sim.scene_features) and the SciPy adjustme
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -270,6 +271,18 @@ def test_binding_errors_are_input_errors_with_the_reason(change, words):
     with pytest.raises(InputError) as error:
         _core.solve_bundle(**dict(_small_problem(), **change))
     assert words in str(error.value)
+
+
+def test_a_problem_larger_than_the_machine_is_refused_before_it_is_built():
+    """One point seen from every keyframe links them all: the reduced camera matrix (6 x 6 blocks of
+    8 bytes, twice) would need more than the machine's memory."""
+    memory = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    count = int(np.sqrt(2 * memory / 576)) + 1000
+    poses = np.c_[np.linspace(0, 1, count), np.zeros((count, 5))]
+    uv = np.full((count, 2), 160.0)
+    with pytest.raises(InputError, match="GB, more than the"):
+        _core.solve_bundle(_camera(PAPER_CAMERA.params), poses, np.arange(count), np.zeros(count, np.int64), uv,
+                           np.zeros_like(uv), np.zeros(1, np.int64), np.array([[0.0, 0.0, 0.5]]))
 
 
 def test_option_and_wrapper_errors_are_input_errors():
