@@ -106,6 +106,11 @@ void BindBundle(py::module_& m) {
       .def_property("num_threads", &ThreadCount<BundleOptions>, &SetThreadCount<BundleOptions>)
       .def_readwrite("linear_solver", &BundleOptions::linear_solver,
                      "sparse_schur (SuiteSparse) | dense_schur | iterative_schur")
+      .def_readwrite("near_limit", &BundleOptions::near_limit,
+                     "a point stays farther from its anchor than near_limit x the median start "
+                     "depth (<= 0: no bound)")
+      .def_readwrite("beyond_infinity_limit", &BundleOptions::beyond_infinity_limit,
+                     "rho >= -beyond_infinity_limit x the median start rho (< 0: no bound)")
       .def_readwrite("scale_keyframe", &BundleOptions::scale_keyframe,
                      "the keyframe whose distance from the first is held; -1: the farthest")
       .def_readwrite("prior_pixel_sigma_px", &BundleOptions::prior_pixel_sigma_px,
@@ -129,6 +134,8 @@ void BindBundle(py::module_& m) {
       .def_readonly("dropped_points", &BundleResult::dropped_points)
       .def_readonly("scale_keyframe", &BundleResult::scale_keyframe)
       .def_readonly("points_beyond_infinity", &BundleResult::points_beyond_infinity)
+      .def_readonly("points_at_bounds", &BundleResult::points_at_bounds,
+                    "points whose rho ended at a bound (near_limit, beyond_infinity_limit)")
       .def_readonly("termination", &BundleResult::termination)
       .def_readonly("converged", &BundleResult::converged)
       .def_readonly("iterations", &BundleResult::iterations)
@@ -149,10 +156,10 @@ void BindBundle(py::module_& m) {
 
   m.def("solve_bundle", &Solve, py::arg("camera"), py::arg("keyframe_poses"),
         py::arg("observation_keyframe"), py::arg("observation_point"), py::arg("uv_px"),
-        py::arg("image_velocity_px_s"), py::arg("point_anchor"), py::arg("points"), py::kw_only(),
+        py::arg("image_velocity_px_s"), py::arg("point_anchor"), py::arg("points"),
         py::arg("free_intrinsics") = py::none(), py::arg("line_delay_s") = 0.0,
         py::arg("estimate_line_delay") = false, py::arg("line_delay_prior") = py::none(),
-        py::arg("reference_row") = 0.0, py::arg("options") = BundleOptions(),
+        py::arg("reference_row") = 0.0, py::arg_v("options", BundleOptions(), "BundleOptions()"),
         "The self-calibration bundle adjustment (docs/sog.md §22): keyframe_poses (K, 6) [p; phi] "
         "T_cw; per observation its keyframe, point, uv_px (N, 2) and image_velocity_px_s (N, 2); "
         "per point its anchor keyframe and (a, b, rho) (P, 3). free_intrinsics: per camera "

@@ -63,6 +63,8 @@ void CheckOptions(const BundleOptions& options) {
         "bundle adjustment: linear_solver must be sparse_schur, dense_schur or iterative_schur, "
         "got '" +
         solver + "'");
+  if (!std::isfinite(options.near_limit) || !std::isfinite(options.beyond_infinity_limit))
+    throw InputError("bundle adjustment: near_limit and beyond_infinity_limit must be finite");
   if (!(options.prior_pixel_sigma_px > 0.0) || !std::isfinite(options.prior_pixel_sigma_px))
     throw InputError("bundle adjustment: prior_pixel_sigma_px must be positive and finite");
 }
@@ -191,6 +193,22 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
   double line_delay_us = data.line_delay.value_s / kMicroseconds;
   const double pixel_size[2] = {camera.pixel_size_mm()[0], camera.pixel_size_mm()[1]};
 
+  // Inverse-depth bounds, relative to the median start depth (the gauge's units): without parallax
+  // (a camera only turning) a point's rho is not observed and would wander, onto its anchor's
+  // centre (rho -> +-inf) or far beyond infinity; the bounds keep it in a physical range.
+  std::vector<double> start_rho;
+  for (int j = 0; j < num_points; ++j)
+    if (points(j, 2) > 0.0) start_rho.push_back(points(j, 2));
+  double rho_low = -std::numeric_limits<double>::infinity();
+  double rho_high = std::numeric_limits<double>::infinity();
+  if (!start_rho.empty()) {
+    std::nth_element(start_rho.begin(), start_rho.begin() + start_rho.size() / 2, start_rho.end());
+    const double median_rho = start_rho[start_rho.size() / 2];
+    if (options.near_limit > 0.0) rho_high = median_rho / options.near_limit;
+    if (options.beyond_infinity_limit >= 0.0) rho_low = -options.beyond_infinity_limit * median_rho;
+  }
+  for (int j = 0; j < num_points; ++j) points(j, 2) = std::clamp(points(j, 2), rho_low, rho_high);
+
   // The cost of every observation (kept: they give the residuals and Jacobians afterwards).
   std::vector<std::unique_ptr<ceres::CostFunction>> costs(n);
   std::vector<ObservationBlocks> blocks(n);
@@ -312,8 +330,11 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
   }
   for (int j = 0; j < num_points; ++j) {
     if (!point_used[j]) continue;
-    problem.AddParameterBlock(points.row(j).data(), 3);
-    ordering->AddElementToGroup(points.row(j).data(), 0);
+    double* point = points.row(j).data();
+    problem.AddParameterBlock(point, 3);
+    ordering->AddElementToGroup(point, 0);
+    if (std::isfinite(rho_low)) problem.SetParameterLowerBound(point, 2, rho_low);
+    if (std::isfinite(rho_high)) problem.SetParameterUpperBound(point, 2, rho_high);
   }
   for (int i = 0; i < n; ++i)
     if (result.used[i]) problem.AddResidualBlock(costs[i].get(), loss.get(), blocks[i].blocks);
@@ -365,8 +386,11 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
   result.line_delay_s = line_delay_us * kMicroseconds;
   result.keyframe_poses = poses;
   result.points = points;
-  for (int j = 0; j < num_points; ++j)
-    result.points_beyond_infinity += point_used[j] && points(j, 2) < 0.0 ? 1 : 0;
+  for (int j = 0; j < num_points; ++j) {
+    if (!point_used[j]) continue;
+    result.points_beyond_infinity += points(j, 2) < 0.0 ? 1 : 0;
+    result.points_at_bounds += points(j, 2) <= rho_low || points(j, 2) >= rho_high ? 1 : 0;
+  }
 
   // Residuals at the solution.
   result.residuals_px = Eigen::MatrixX2d::Constant(n, 2, std::numeric_limits<double>::quiet_NaN());

@@ -82,6 +82,7 @@ class AdjustmentResult:
     dropped_observations: int
     dropped_points: int
     scale_keyframe: int
+    points_at_bounds: int
 
     @property
     def camera_params(self) -> np.ndarray:
@@ -177,6 +178,9 @@ def adjust(tracks: KeyframeTracks, camera: _core.CameraModel, *,
                                 line_delay_prior=None if line_delay_prior is None else tuple(map(float, line_delay_prior)),
                                 reference_row=row, options=options)
     estimate = np.r_[result.camera_params, result.line_delay_s]
+    # the binding's arrays are read-only views into the C++ result: copies the caller may change
+    cov_model, cov_tracks, cov_two_way = (np.array(c) for c in (result.covariance_model, result.covariance_tracks,
+                                                               result.covariance_two_way))
 
     def bounds(cov: np.ndarray) -> np.ndarray:
         half = Z99 * np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -184,22 +188,22 @@ def adjust(tracks: KeyframeTracks, camera: _core.CameraModel, *,
 
     adjusted = _core.CameraModel(camera.model, result.camera_params, camera.width, camera.height,
                                  camera.pixel_size_mm)
-    points_anchored = np.asarray(result.points)
-    keyframe_poses = np.asarray(result.keyframe_poses)
+    points_anchored = np.array(result.points)
+    keyframe_poses = np.array(result.keyframe_poses)
     anchor = np.asarray(anchor, np.int64)
     return AdjustmentResult(
         camera=adjusted, line_delay_s=float(result.line_delay_s),
         estimates_line_delay=bool(estimate_line_delay or line_delay_prior is not None),
-        names=names + ["line_delay_s"], covariance_model=result.covariance_model,
-        covariance_tracks=result.covariance_tracks, covariance_two_way=result.covariance_two_way,
-        bounds_99_model=bounds(result.covariance_model), bounds_99_tracks=bounds(result.covariance_tracks),
-        bounds_99_two_way=bounds(result.covariance_two_way), keyframe_poses=keyframe_poses,
+        names=names + ["line_delay_s"], covariance_model=cov_model, covariance_tracks=cov_tracks,
+        covariance_two_way=cov_two_way, bounds_99_model=bounds(cov_model), bounds_99_tracks=bounds(cov_tracks),
+        bounds_99_two_way=bounds(cov_two_way), keyframe_poses=keyframe_poses,
         point_anchor=anchor, points_anchored=points_anchored,
         points_w=_world_points(keyframe_poses, anchor, points_anchored),
-        residuals_px=result.residuals_px, used=result.used, inlier=result.inlier, sigma_px=result.sigma_px,
+        residuals_px=np.array(result.residuals_px), used=np.array(result.used), inlier=np.array(result.inlier),
+        sigma_px=result.sigma_px,
         rms_px=result.rms_px, converged=result.converged, termination=result.termination, message=result.message,
         iterations=result.iterations, initial_cost=result.initial_cost, final_cost=result.final_cost,
         solve_time_s=result.solve_time_s, covariance_time_s=result.covariance_time_s,
         covariance_ok=result.covariance_ok, step_sigma=result.step_sigma,
         dropped_observations=result.dropped_observations, dropped_points=result.dropped_points,
-        scale_keyframe=result.scale_keyframe)
+        scale_keyframe=result.scale_keyframe, points_at_bounds=result.points_at_bounds)

@@ -24,12 +24,14 @@ inline camera::CameraModel PaperCamera() {
   return camera::CameraModel("civera-radial", params, 320, 240, Eigen::Vector2d(0.0112, 0.0112));
 }
 
-// T_cw [p; phi] of the walking, turning camera at time t (s).
-inline Eigen::Matrix<double, 6, 1> WalkPose(double t) {
+// T_cw [p; phi] of the walking, turning camera at time t (s); its path scaled by `walk` (0: only
+// turning).
+inline Eigen::Matrix<double, 6, 1> WalkPose(double t, double walk = 1.0) {
   // the turning rates change sign within a few seconds: a rolling shutter's shear then differs
   // between keyframes and cannot be absorbed by a deformed scene
-  const Eigen::Vector3d centre(0.6 * std::sin(0.9 * t), 0.1 * std::sin(1.9 * t),
-                               0.5 * std::sin(0.7 * t) - 0.2);
+  const Eigen::Vector3d centre =
+      walk * Eigen::Vector3d(0.6 * std::sin(0.9 * t), 0.1 * std::sin(1.9 * t),
+                             0.5 * std::sin(0.7 * t) - 0.2);
   const double yaw = 0.6 * std::sin(1.1 * t) + 0.2 * t, pitch = 0.2 * std::sin(1.7 * t + 0.5),
                roll = 0.1 * std::sin(2.3 * t);
   // R_wc = Ry(yaw) Rx(pitch) Rz(roll) (y down: yaw about the vertical)
@@ -77,6 +79,7 @@ struct SceneOptions {
   double line_delay_s = 0.0;
   int min_views = 3;
   double room_scale = 1.0;  // the room's points scaled about the world origin
+  double walk = 1.0;        // the camera's path scaled (0: only turning)
   unsigned seed = 1;
 };
 
@@ -100,7 +103,7 @@ inline Scene MakeScene(const SceneOptions& o) {
   const auto& cam = scene.camera;
   scene.poses.resize(o.keyframes, 6);
   for (int k = 0; k < o.keyframes; ++k)
-    scene.poses.row(k) = WalkPose(k * o.keyframe_interval_s).transpose();
+    scene.poses.row(k) = WalkPose(k * o.keyframe_interval_s, o.walk).transpose();
   struct Obs {
     int keyframe;
     Eigen::Vector2d uv, velocity;
@@ -111,16 +114,16 @@ inline Scene MakeScene(const SceneOptions& o) {
     const double t = k * o.keyframe_interval_s;
     for (size_t j = 0; j < all_points.size(); ++j) {
       Eigen::Vector2d uv;
-      if (!ProjectWorld(cam, WalkPose(t), all_points[j], &uv)) continue;
+      if (!ProjectWorld(cam, WalkPose(t, o.walk), all_points[j], &uv)) continue;
       bool ok = true;  // rolling shutter: the row's own time, by fixed-point iteration
       for (int pass = 0; pass < 5 && ok && o.line_delay_s != 0.0; ++pass)
-        ok = ProjectWorld(cam, WalkPose(t + o.line_delay_s * (uv[1] - scene.reference_row)),
+        ok = ProjectWorld(cam, WalkPose(t + o.line_delay_s * (uv[1] - scene.reference_row), o.walk),
                           all_points[j], &uv);
       const double t_row = t + o.line_delay_s * (uv[1] - scene.reference_row);
       Eigen::Vector2d before, after;
       const double dt = 1e-4;
-      ok = ok && ProjectWorld(cam, WalkPose(t_row - dt), all_points[j], &before) &&
-           ProjectWorld(cam, WalkPose(t_row + dt), all_points[j], &after);
+      ok = ok && ProjectWorld(cam, WalkPose(t_row - dt, o.walk), all_points[j], &before) &&
+           ProjectWorld(cam, WalkPose(t_row + dt, o.walk), all_points[j], &after);
       if (!ok || uv[0] < border || uv[1] < border || uv[0] > cam.width() - 1 - border ||
           uv[1] > cam.height() - 1 - border)
         continue;

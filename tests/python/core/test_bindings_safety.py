@@ -66,7 +66,8 @@ def _bundle_args():
     uv = np.vstack([camera.project(points + pose[:3]) for pose in poses])
     abr = np.column_stack([points[:, :2] / 3.0, np.full(len(points), 1 / 3.0)])
     return (camera, poses, np.repeat(np.arange(3), len(points)), np.tile(np.arange(len(points)), 3), uv,
-            np.zeros_like(uv), np.zeros(len(points), np.int64), abr)
+            np.zeros_like(uv), np.zeros(len(points), np.int64), abr, None, 0.0, False, None, 119.5,
+            _core.BundleOptions())
 
 
 def _calls():

@@ -6,6 +6,7 @@ Oracles: the simulated truth (rscalib.sim.scene_features) and the SciPy adjustme
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -191,6 +192,9 @@ def test_zero_line_delay_inside_its_bounds_on_a_global_shutter(walk):
     held = adjust(tracks, _camera(START))
     assert held.line_delay_s == 0.0 and not held.covariance_two_way[5].any()
     assert _inside(held.bounds_99_two_way[:5], PAPER_CAMERA.params).all()
+    # the arrays are the caller's (the binding's are read-only views into the C++ result)
+    for array in (held.keyframe_poses, held.points_anchored, held.covariance_two_way, held.residuals_px, held.inlier):
+        assert array.flags.writeable
 
 
 def test_a_line_delay_prior_and_held_parameters(rolling_walk):
@@ -267,6 +271,18 @@ def test_binding_errors_are_input_errors_with_the_reason(change, words):
     with pytest.raises(InputError) as error:
         _core.solve_bundle(**dict(_small_problem(), **change))
     assert words in str(error.value)
+
+
+def test_a_problem_larger_than_the_machine_is_refused_before_it_is_built():
+    """One point seen from every keyframe links them all: the reduced camera matrix (6 x 6 blocks of
+    8 bytes, twice) would need more than the machine's memory."""
+    memory = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    count = int(np.sqrt(2 * memory / 576)) + 1000
+    poses = np.c_[np.linspace(0, 1, count), np.zeros((count, 5))]
+    uv = np.full((count, 2), 160.0)
+    with pytest.raises(InputError, match="GB, more than the"):
+        _core.solve_bundle(_camera(PAPER_CAMERA.params), poses, np.arange(count), np.zeros(count, np.int64), uv,
+                           np.zeros_like(uv), np.zeros(1, np.int64), np.array([[0.0, 0.0, 0.5]]))
 
 
 def test_option_and_wrapper_errors_are_input_errors():

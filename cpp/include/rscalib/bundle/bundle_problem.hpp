@@ -58,6 +58,11 @@ struct BundleOptions {
   double parameter_tolerance = 1e-10;
   int num_threads = 2;
   std::string linear_solver = "sparse_schur";  // sparse_schur | dense_schur | iterative_schur
+  // Bounds of each point's inverse depth rho, relative to the median start rho m: a point stays
+  // farther from its anchor than near_limit / m (rho <= m / near_limit) and at most
+  // beyond_infinity_limit m beyond infinity (rho >= -beyond_infinity_limit m). <= 0 / < 0: none.
+  double near_limit = 0.01;
+  double beyond_infinity_limit = 0.1;
   int scale_keyframe = -1;            // -1: the keyframe farthest from the first at the start
   double prior_pixel_sigma_px = 0.5;  // the pixel noise a line-delay prior is weighed against
   bool compute_covariance = true;
@@ -76,8 +81,14 @@ struct BundleResult {
   int dropped_observations = 0;  // could not be projected at the start, or their point
                                  // was then seen fewer than twice
   int dropped_points = 0;
+  // Bounds of each point's inverse depth rho, relative to the median start rho m: a point stays
+  // farther from its anchor than near_limit / m (rho <= m / near_limit) and at most
+  // beyond_infinity_limit m beyond infinity (rho >= -beyond_infinity_limit m). <= 0 / < 0: none.
+  double near_limit = 0.01;
+  double beyond_infinity_limit = 0.1;
   int scale_keyframe = -1;         // the keyframe whose distance from the first was held
   int points_beyond_infinity = 0;  // rho < 0 at the end (far points' noise)
+  int points_at_bounds = 0;  // rho at a bound (BundleOptions::near_limit, beyond_infinity_limit)
   // Ceres' summary.
   std::string termination;  // CONVERGENCE | NO_CONVERGENCE | FAILURE | ...
   bool converged = false;
