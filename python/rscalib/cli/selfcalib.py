@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..selfcalib.options import SUBPIXEL_MODES, FrontEndOptions, SelfCalibOptions
-from .common import CAPTURE_GUIDE, FOCAL_PX, FRAMES, line_delay, number
+from .common import CAPTURE_GUIDE, FOCAL_PX, FRAMES, add_force, line_delay, number
 
 
 def add_parser(sub) -> None:
@@ -22,6 +22,7 @@ def add_parser(sub) -> None:
                                    "file-name order with an optional timestamps.txt (one time in seconds per line).")
     p.add_argument("source", help="video file or image folder")
     p.add_argument("--out", required=True, help="output folder (created)")
+    add_force(p)
     p.add_argument("--pixel-size-mm", type=number(1e-4, 1.0, " mm"), default=None,
                    help="sensor pixel pitch in mm: the distortion's radii are in mm, so it sets the units of k1 "
                         "(mm^-2) and k2 (mm^-4) and nothing else (f and the principal point do not depend on it); "
@@ -92,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
     options = selfcalib_options(args)
     if not Path(args.source).exists():
         raise InputError(f"not found: {args.source}")
-    check_output_folder(args.out, expected_output_bytes(16), inputs=[args.source])
+    check_output_folder(args.out, expected_output_bytes(16), inputs=[args.source], command=args.command,
+                        force=args.force)
     run_ = self_calibrate(args.source, options, progress=not args.quiet)
     written = run_.write(args.out)
     result, verdict = run_.result, run_.verdict
@@ -120,6 +122,17 @@ def run(args: argparse.Namespace) -> int:
     if ba_bounds is not None and not ba_bounds[0, 0] <= fm[0] <= ba_bounds[0, 1]:
         filter_line += " (outside the adjustment's bounds: not used; sog.md §15)"
     print(filter_line)
+    check = result.self_check
+    if check:
+        z = dict(zip(check["names"], check["z"]))
+        worst = sorted(z, key=z.get, reverse=True)[:2]
+        said = ", ".join(f"{name} {z[name]:.1f} sigma" for name in worst)
+        if max(z.values()) <= 3:
+            print(f"  self-check: the two halves of the video agree (largest difference {said})"
+                  + (f"; sigmas widened x{check['widen'][0]:.2f}" if check["widen"][0] > 1 else ""))
+        else:
+            print(f"  self-check: the two halves of the video differ ({said}): every sigma widened "
+                  f"x{check['widen'][0]:.1f}")
     if result.adjustment_error:
         print(f"warning: bundle adjustment failed: {result.adjustment_error}", file=sys.stderr)
     given = "given" if args.pixel_size_mm is not None else \

@@ -8,6 +8,7 @@ camera and poses (:mod:`rscalib.selfcalib.keyframes`), and the judgement
 (pipeline.py), which calls :func:`calibrate_frames`."""
 from __future__ import annotations
 
+import contextlib
 from typing import Any, Callable, Iterable, Iterator, Optional
 
 import cv2
@@ -108,7 +109,57 @@ def _frame_count(frames, max_frames: Optional[int], expected_frames: Optional[in
     return len(frames) if hasattr(frames, "__len__") else None
 
 
-def _feeding(tracker: FeatureTracker, frames: Iterable) -> Iterator:
+class _BackgroundTracker:
+    """The tracker in a thread of its own, fed the filter's frames through a short queue: OpenCV and
+    the bank's C++ update release the GIL, so tracking runs beside the filter on a second core. The
+    frames reach it in order, so its tracks are those of a tracker called in line (deterministic)."""
+
+    QUEUED_FRAMES = 8       # a few frames of slack (a 640x480 grey frame is 0.3 MB)
+
+    def __init__(self, tracker: FeatureTracker):
+        import queue
+        import threading
+
+        self.tracker, self.error = tracker, None
+        self.queue: queue.Queue = queue.Queue(maxsize=self.QUEUED_FRAMES)
+        self.thread = threading.Thread(target=self._work, name="rscalib-tracker", daemon=True)
+        self.thread.start()
+
+    def _work(self) -> None:
+        while True:
+            item = self.queue.get()
+            if item is None:
+                return
+            if self.error is None:
+                try:
+                    self.tracker.add_frame(*item)
+                except BaseException as error:   # handed to the caller at the next frame or at the end
+                    self.error = error
+
+    def add_frame(self, t_s: float, image) -> None:
+        if self.error is not None:
+            raise self.error
+        self.queue.put((t_s, image))
+
+    def result(self) -> TrackSet:
+        self.close()
+        if self.error is not None:
+            raise self.error
+        return self.tracker.result()
+
+    def close(self) -> None:
+        if self.thread.is_alive():
+            self.queue.put(None)
+            self.thread.join()
+
+    def __enter__(self) -> _BackgroundTracker:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _feeding(tracker, frames: Iterable) -> Iterator:
     """The frames, each handed to the tracker first (one decode serves the filter and the tracker)."""
     for t_s, image in frames:
         if image is not None:
@@ -117,7 +168,7 @@ def _feeding(tracker: FeatureTracker, frames: Iterable) -> Iterator:
 
 
 def _run(frames, width: int, height: int, pixel_size_mm, options, front_end, initial, max_frames, on_frame,
-         line_delay_s: float, tracker: Optional[FeatureTracker] = None
+         line_delay_s: float, tracker: Optional[_BackgroundTracker] = None
          ) -> tuple[SogBank, SelfCalibHistory, ImageFrontEnd, list]:
     """One pass of the bank over the frames (with the tracker fed the same frames, when given); the
     bank, its history, its front end and its merged camera state after every processed frame (when
@@ -226,7 +277,9 @@ def _halves_check(observations, poses: FilterPoses, whole: AdjustmentResult, sol
     apart, from the whole's camera. Per parameter z = |a - b| / sqrt(sa^2 + sb^2) of the halves'
     estimates with their (two-way clustered) sigmas; when the halves scatter more than their sigmas
     say (z > 1) the whole's sigma is too small by about that factor (the Birge ratio, as the line
-    delay's self-check: docs/formulation.md §9). None when a half cannot be adjusted."""
+    delay's self-check: docs/formulation.md §9). Every parameter is widened by the largest z: a misfit
+    seen in one parameter reaches the others through their correlations, in shares the check cannot
+    tell (docs/sog.md §24). None when a half cannot be adjusted."""
     camera = whole.camera
     estimates, sigmas = [], []
     for part in halves(observations, MIN_TRACK_KEYFRAMES):
@@ -245,7 +298,7 @@ def _halves_check(observations, poses: FilterPoses, whole: AdjustmentResult, sol
         z = np.where((sa > 0) & (sb > 0), np.abs(a - b) / np.hypot(sa, sb), 0.0)
     names = list(whole.names)
     return {"names": names, "halves": [e.tolist() for e in estimates], "sigmas": [s.tolist() for s in sigmas],
-            "z": z.tolist(), "widen": np.maximum(1.0, z).tolist()}
+            "z": z.tolist(), "widen": [float(max(1.0, z.max(initial=0.0)))] * len(z)}
 
 
 def calibrate_frames(frames, image_size: tuple[int, int], options: Optional[SelfCalibOptions] = None, *,
@@ -301,9 +354,12 @@ def calibrate_frames(frames, image_size: tuple[int, int], options: Optional[Self
             if on_frame is not None:
                 on_frame(k, running, report)
 
-        tracker = FeatureTracker((width, height), options.tracks) if bundle else None
-        bank, history, source, states = _run(first_frames, width, height, pixel_size_mm, sog, fe,
-                                             initial, max_frames, each_frame, line_delay_s, tracker)
+        with contextlib.ExitStack() as stack:
+            tracker = stack.enter_context(_BackgroundTracker(FeatureTracker((width, height), options.tracks))) \
+                if bundle else None
+            bank, history, source, states = _run(first_frames, width, height, pixel_size_mm, sog, fe,
+                                                 initial, max_frames, each_frame, line_delay_s, tracker)
+            tracks = tracker.result() if bundle else None
         mean = np.asarray(bank.calibration_mean)
         runs = []
         if checking and bank.num_gaussians == 1:
@@ -324,7 +380,6 @@ def calibrate_frames(frames, image_size: tuple[int, int], options: Optional[Self
         adjusted: tuple = (None, "", {}, None)
         if bundle:
             bar.update(len(history), "bundle adjustment over the tracks")
-            tracks = tracker.result()
             if len(tracks.t_s) != len(states):
                 raise InputError("the tracker and the filter saw different frames")   # a bug, said plainly
             camera0 = CameraModel("civera-radial", mean, width, height, pixel_size_mm=_pixel_pair(pixel_size_mm))

@@ -60,6 +60,7 @@ class FrontEndOptions:
                        max_search_half_px=self.max_search_half_px * scale)
 
 
+_TRACK_RANSAC_METHODS = ("ransac", "magsac")
 _REFERENCE_WIDTH = 640.0   # TrackOptions' pixel sizes are for 640x480; scaled with the width
 
 
@@ -125,6 +126,32 @@ class TrackOptions:
     reid_neighbour_px: float = 20.0    # ... and its motion since then within this (or 3 spreads) of
     #                                    its 8 nearest live tracks' (an epipolar line is long)
     reid_search_keyframes: int = 60    # keyframes searched for one that saw the candidates
+
+    def __post_init__(self) -> None:
+        """InputError (one line) for values that mean nothing: counts and sizes must be positive
+        whole numbers (klt_levels and border_px may be 0), lengths positive, shares in (0, 1]."""
+        from dataclasses import fields
+
+        shares = {"corner_quality", "detect_below_fraction", "homography_share", "keyframe_min_survival",
+                  "anchor_min_zncc", "reid_ratio", "reid_min_zncc"}
+        choices = {"ransac_method": _TRACK_RANSAC_METHODS, "on_anchor_failure": ("end", "reanchor")}
+        for item in fields(self):
+            value = getattr(self, item.name)
+            if item.name in choices:
+                if value not in choices[item.name]:
+                    raise InputError(f"TrackOptions.{item.name}: {value!r} is not one of {', '.join(choices[item.name])}")
+            elif isinstance(value, bool) or item.type in ("bool", bool):
+                if not isinstance(value, bool):
+                    raise InputError(f"TrackOptions.{item.name}: give True or False, not {value!r}")
+            elif item.type in ("int", int):
+                least = 0 if item.name in ("klt_levels", "border_px") else 1
+                if not (isinstance(value, int) and value >= least):
+                    raise InputError(f"TrackOptions.{item.name}: a whole number >= {least}, not {value!r}")
+            else:
+                ok = isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+                if not ok or (item.name in shares and value > 1):
+                    limits = "in (0, 1]" if item.name in shares else "a positive number"
+                    raise InputError(f"TrackOptions.{item.name}: {limits}, not {value!r}")
 
     def scaled(self, image_size: tuple[int, int]) -> TrackOptions:
         """These options for ``image_size`` (width, height)."""
