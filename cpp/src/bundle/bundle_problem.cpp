@@ -187,10 +187,17 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
   }
 
   BundleResult result;
-  Eigen::VectorXd intrinsics = camera.params();
-  KeyframePoseMatrix poses = data.keyframe_poses;
+  // The camera, the line delay and the poses in one buffer, in this order: Ceres orders the blocks
+  // of an elimination group by address, and separate allocations put the camera at another place
+  // among the poses from call to call (the solution then differed in its last bits).
+  std::vector<double> globals(n_cam + 1 + 6 * static_cast<size_t>(num_keyframes));
+  Eigen::Map<Eigen::VectorXd> intrinsics(globals.data(), n_cam);
+  intrinsics = camera.params();
+  double& line_delay_us = globals[n_cam];
+  line_delay_us = data.line_delay.value_s / kMicroseconds;
+  Eigen::Map<KeyframePoseMatrix> poses(globals.data() + n_cam + 1, num_keyframes, 6);
+  poses = data.keyframe_poses;
   AnchoredPointMatrix points = data.points;
-  double line_delay_us = data.line_delay.value_s / kMicroseconds;
   const double pixel_size[2] = {camera.pixel_size_mm()[0], camera.pixel_size_mm()[1]};
 
   // Inverse-depth bounds, relative to the median start depth (the gauge's units): without parallax

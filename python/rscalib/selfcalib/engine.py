@@ -233,7 +233,9 @@ def _adjust(tracks: TrackSet, states: list, camera0: CameraModel, options: SelfC
             ) -> tuple[Optional[AdjustmentResult], str, dict, Optional[dict]]:
     """The adjustment over the tracks from the bank's camera and poses: its result (None when it
     could not run), the reason when not, what went into it, and the self-check of its two halves."""
-    used: dict = {k: v for k, v in tracks.stats.items() if isinstance(v, (int, float))}
+    # the tracker's counters; its clock as a *_time_s (a time: not compared between runs)
+    used: dict = {("tracking_time_s" if k == "wall_s" else k): v for k, v in tracks.stats.items()
+                  if isinstance(v, (int, float)) and k != "ms_per_frame_wall"}
     try:
         observations = tracks.keyframe_observations(min_keyframes=MIN_TRACK_KEYFRAMES,
                                                     max_keyframes=options.max_keyframes)
