@@ -92,8 +92,10 @@ def _finite(x) -> Optional[float]:
 
 def _median_board_distance_m(result) -> Optional[float]:
     """Median distance from the camera to the board's centre over the frames (the PnP poses)."""
-    poses = getattr(result, "frame_poses", None) or getattr(result, "gs_poses", None)
+    poses = getattr(result, "gs_poses", None)   # the linear model's PnP poses (its frame_poses are an array)
     if poses is None:
+        poses = getattr(result, "frame_poses", None)
+    if poses is None or not hasattr(poses, "translation"):
         return None
     try:
         centre = np.mean(result.used_observations.target_points, axis=0)
@@ -176,7 +178,7 @@ def _physical(e: dict) -> Optional[Finding]:
         problems.append(f"the target file's squares are {square:.3g} m")
     if not problems:
         return None
-    size = "" if square is None else f" (it says {square * 1e3:.4g} mm squares)"
+    size = "" if square is None else f" (it says squares of {square:.4g} m = {square * 1e3:.6g} mm)"
     return Finding(TARGET_SIZE, NOT_TRUSTED, "; ".join(problems),
                    f"check the square size in the target file first{size}: rowSpacingMeters and colSpacingMeters "
                    "are in metres (40 mm is 0.04)")

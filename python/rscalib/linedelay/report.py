@@ -336,14 +336,14 @@ def _plot_jobs(result: Estimate, verdict: Verdict) -> list:
     if isinstance(result, LineDelayResult) and verdict.claims:
         jobs += [PlotJob("How image motion stretches the detection noise (paper Fig. 2)", plot_covariance_ellipses,
                          "covariance_ellipses.png",
-                         "Red ellipses longer than the grey circles show the rolling shutter at work: the faster "
-                         "the image moves, the more a corner's row time blurs its position.", expert=True),
+                         "Look for red ellipses longer than the grey circles: the rolling shutter at work (the "
+                         "faster the image moves, the more a corner's row time blurs its position).", expert=True),
                  PlotJob("Knot density and image motion", plot_knots_and_speed, "knots_speed.png",
-                         "The bars (knots of the trajectory per second) should rise where the line (image "
+                         "Look for bars (knots of the trajectory per second) that rise where the line (image "
                          "speed) rises: the trajectory takes more knots where the motion is fast.", expert=True),
                  PlotJob("Line delay per knot-adaptation round", plot_rounds, "rounds.png",
-                         "The line delay should settle over the rounds, the last ones well inside the final "
-                         "±3σ bar.", expert=True)]
+                         "Look for a line delay that settles over the rounds, the last ones well inside the "
+                         "final ±3σ bar.", expert=True)]
     return jobs
 
 
