@@ -152,11 +152,12 @@ def _encode(images: list, times: np.ndarray, fps: float, bits_per_pixel: float, 
     import subprocess
 
     work.mkdir(parents=True, exist_ok=True)
-    lines = []
+    # each image a 1/90000 s stream (option framerate) lasting until the next frame's time (duration):
+    # the container then carries the recorded times (to 1/90000 s)
+    lines = ["ffconcat version 1.0"]
     for i, image in enumerate(images):
-        lines.append(f"file '{Path(image).resolve()}'")
-        lines.append(f"duration {(times[i + 1] - times[i]) if i + 1 < len(times) else 1.0 / fps:.9f}")
-    lines.append(f"file '{Path(images[-1]).resolve()}'")
+        lines += [f"file '{Path(image).resolve()}'", "option framerate 90000",
+                  f"duration {(times[i + 1] - times[i]) if i + 1 < len(times) else 1.0 / fps:.9f}"]
     (work / "list.txt").write_text("\n".join(lines) + "\n")
     h, w = cv2.imread(str(images[0]), cv2.IMREAD_GRAYSCALE).shape
     rate = int(bits_per_pixel * w * h * fps)
@@ -422,6 +423,9 @@ def main() -> int:
                 continue
             row = run_one(run, videos, args.videos / "cache")
             rows.append(row)
+            partial = out_path.with_suffix(".partial.json")
+            partial.parent.mkdir(parents=True, exist_ok=True)
+            partial.write_text(json.dumps({"runs": rows}, default=str))
             print(json.dumps({k: row.get(k) for k in ("name", "fault", "status", "z", "first_cause", "seconds")}
                              | {"refined": (row.get("refined") or {}).get("status")}), flush=True)
     summary = summarise(rows)

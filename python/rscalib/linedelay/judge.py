@@ -125,6 +125,38 @@ def target_spacing_m(target_points: np.ndarray) -> Optional[float]:
     return nearest if math.isfinite(nearest) and nearest > 0 else None
 
 
+# residual_structure: the image cut into this many cells (columns, rows) for the fixed-field test
+FIELD_CELLS = (8, 6)
+
+
+def residual_structure(result) -> dict:
+    """Where the residuals' structure lives, each as a chi-square per degree of freedom of group means
+    (about 1 when the residuals do not depend on the grouping): `image_field`, the mean residual of each
+    cell of the image (FIELD_CELLS) over the whole video -- a wrong camera file is a fixed function of
+    the pixel; `frame_common`, each frame's mean residual -- a trajectory that does not follow the motion,
+    or a frame shifted as a whole, errs per frame."""
+    r = np.asarray(getattr(result, "residual_px", np.zeros((0, 2))), dtype=float)
+    obs = result.used_observations
+    keep = np.all(np.isfinite(r), axis=1)
+    if keep.sum() < 20:
+        return {"image_field": None, "frame_common": None}
+    r, uv, frames = r[keep], obs.uv[keep], obs.frame_index[keep]
+    s2 = float(np.mean(r ** 2))   # per coordinate
+    if not s2 > 0:
+        return {"image_field": None, "frame_common": None}
+
+    def chi(groups: np.ndarray) -> float:
+        _, inverse, counts = np.unique(groups, return_inverse=True, return_counts=True)
+        sums = np.stack([np.bincount(inverse, weights=r[:, k]) for k in range(2)], axis=1)
+        stat = (sums ** 2).sum(axis=1) / counts / s2    # n |mean|^2 / s2, ~ chi2(2) under independence
+        return float(np.mean(stat) / 2.0)
+
+    w, h = obs.image_size
+    cells = (np.clip((uv[:, 0] / w * FIELD_CELLS[0]).astype(int), 0, FIELD_CELLS[0] - 1) * FIELD_CELLS[1]
+             + np.clip((uv[:, 1] / h * FIELD_CELLS[1]).astype(int), 0, FIELD_CELLS[1] - 1))
+    return {"image_field": chi(cells), "frame_common": chi(frames)}
+
+
 def line_delay_evidence(result, *, frame_rate_hz: Optional[float] = None,
                         bits_per_pixel: Optional[float] = None) -> dict:
     """The numbers the verdict judges, JSON-ready: the estimate and its sigmas (the data's, before the
@@ -159,6 +191,7 @@ def line_delay_evidence(result, *, frame_rate_hz: Optional[float] = None,
         "board_distance_m": _median_board_distance_m(result),
         "square_m": None if target_points is None else target_spacing_m(target_points),
         "bits_per_pixel": _finite(bits_per_pixel),
+        "residual_structure": residual_structure(result),
         "intrinsics_refined": getattr(result, "intrinsics", None) is not None,
         "can_refine_intrinsics": hasattr(result, "intrinsics") and getattr(result, "intrinsics", None) is None,
     }

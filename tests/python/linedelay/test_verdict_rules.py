@@ -4,6 +4,7 @@ the halves' widening cannot flip "determined", halves that agree are no warning.
 
 Oracles: the rules as documented; the truth of the renders (rscalib.sim)."""
 import math
+from pathlib import Path
 import numpy as np
 import pytest
 
@@ -157,3 +158,24 @@ def test_refine_intrinsics_does_not_flip_the_category_of_a_video_whose_halves_di
     assert plain.diagnosis.first_cause == judge.MOTION
     ratio = refined.result.line_delay_std_s / plain.result.line_delay_std_s
     assert 0.9 < ratio < 1.1 and ratio != 1.0   # a few percent of sigma
+
+
+DATA = Path(__file__).parent / "data"
+
+
+def test_the_1280x720_render_with_4ms_blur_and_its_exact_camera_is_trusted():
+    """The issue's first case, on a render of our own (`rscalib simulate --size 1280x720 --exposure 0.004
+    --exposure-samples 4 --duration 2.5 --line-delay 18.5us --seed 31 --supersample 1`, its detections
+    stored): blur makes the grid's noise estimate high, J/2N < 1 -- no reason to distrust a right answer."""
+    from rscalib._core import CameraModel
+
+    data = np.load(DATA / "render_1280x720_blur4ms.npz")
+    observations = Observations(data["frame_times_s"], data["frame_index"].astype(np.int64),
+                                data["point_id"].astype(np.int64), data["uv"], data["target_points"],
+                                tuple(int(x) for x in data["image_size"]))
+    camera = CameraModel("pinhole-radtan", data["camera_params"], 1280, 720)
+    run = calibrate_video(observations, camera=camera)
+    truth = float(data["line_delay_s"])
+    assert run.result.normalised_cost < 1.0
+    assert run.verdict.trusted and run.verdict.exit_code == 0, run.verdict.reasons
+    assert abs(run.line_delay_s - truth) < 3 * run.line_delay_std_s
