@@ -39,7 +39,13 @@ MAX_RELATIVE_STD = 0.02
 DISTANCE_RANGE_M = (0.03, 20.0)
 SQUARE_RANGE_M = (0.002, 0.5)
 # a half's J/2N this many times the other's (and above MAX_COST): the misfit is in that half's motion
-HALF_COST_RATIO = 1.5
+HALF_COST_RATIO = 4.0
+# residual_structure chi-squares per degree of freedom (about 1 for noise) that name a cause: a fixed
+# pattern over the image (the camera file), a shear per frame the line delay does not explain (a
+# stabiliser shifting each frame). Set from the verdict benchmark's tuning set (docs/benchmarks.md):
+# camera faults 5-91 against at most 3.5 for every other run; stabilised 13-28 against at most 5.4.
+FIELD_CHI = 5.0
+SHEAR_CHI = 5.0
 # below this many bits per pixel the video was likely re-encoded (guidance.MIN_BITS_PER_PIXEL)
 LOW_BITS_PER_PIXEL = 0.15
 
@@ -130,31 +136,65 @@ FIELD_CELLS = (8, 6)
 
 
 def residual_structure(result) -> dict:
-    """Where the residuals' structure lives, each as a chi-square per degree of freedom of group means
-    (about 1 when the residuals do not depend on the grouping): `image_field`, the mean residual of each
-    cell of the image (FIELD_CELLS) over the whole video -- a wrong camera file is a fixed function of
-    the pixel; `frame_common`, each frame's mean residual -- a trajectory that does not follow the motion,
-    or a frame shifted as a whole, errs per frame."""
+    """Where the residuals' structure lives, each a chi-square per degree of freedom of group statistics
+    (about 1 when the residuals do not depend on the grouping; the residual variance is the scale):
+
+    - `image_field`: the mean residual of each cell of the image (FIELD_CELLS) over the whole video: a
+      wrong camera file is a fixed function of the pixel;
+    - `frame_common`: each frame's mean residual: a trajectory that does not follow the motion, or a
+      frame shifted as a whole, errs per frame;
+    - `frame_shear`: each frame's residual slope along the rows (u and v against v): a shear the line
+      delay does not explain by the motion between frames (a stabiliser shifting each frame);
+    - the two frame statistics for each half of the video too (`*_halves`)."""
+    none = {"image_field": None, "frame_common": None, "frame_shear": None, "frame_common_halves": None,
+            "frame_shear_halves": None}
     r = np.asarray(getattr(result, "residual_px", np.zeros((0, 2))), dtype=float)
     obs = result.used_observations
+    if r.ndim != 2 or len(r) != len(getattr(obs, "uv", ())):
+        return none
     keep = np.all(np.isfinite(r), axis=1)
     if keep.sum() < 20:
-        return {"image_field": None, "frame_common": None}
+        return none
     r, uv, frames = r[keep], obs.uv[keep], obs.frame_index[keep]
     s2 = float(np.mean(r ** 2))   # per coordinate
     if not s2 > 0:
-        return {"image_field": None, "frame_common": None}
+        return none
 
-    def chi(groups: np.ndarray) -> float:
-        _, inverse, counts = np.unique(groups, return_inverse=True, return_counts=True)
-        sums = np.stack([np.bincount(inverse, weights=r[:, k]) for k in range(2)], axis=1)
-        stat = (sums ** 2).sum(axis=1) / counts / s2    # n |mean|^2 / s2, ~ chi2(2) under independence
-        return float(np.mean(stat) / 2.0)
+    def group_means(groups: np.ndarray, values: np.ndarray):
+        labels, inverse, counts = np.unique(groups, return_inverse=True, return_counts=True)
+        sums = np.stack([np.bincount(inverse, weights=values[:, k]) for k in range(values.shape[1])], axis=1)
+        return labels, inverse, counts, sums / counts[:, None]
+
+    def chi_of_means(groups: np.ndarray, mask=None) -> Optional[float]:
+        labels, _, counts, means = group_means(groups, r)
+        stat = counts * (means ** 2).sum(axis=1) / s2 / 2.0
+        if mask is not None:
+            stat = stat[mask(labels)]
+        return float(np.mean(stat)) if len(stat) else None
 
     w, h = obs.image_size
     cells = (np.clip((uv[:, 0] / w * FIELD_CELLS[0]).astype(int), 0, FIELD_CELLS[0] - 1) * FIELD_CELLS[1]
              + np.clip((uv[:, 1] / h * FIELD_CELLS[1]).astype(int), 0, FIELD_CELLS[1] - 1))
-    return {"image_field": chi(cells), "frame_common": chi(frames)}
+    # per frame: the slope of the residuals against the row, scaled by its noise (s2 / sum (v - mean v)^2)
+    labels, inverse, counts, mean_uv = group_means(frames, np.c_[uv[:, 1]])
+    dv = uv[:, 1] - mean_uv[inverse, 0]
+    svv = np.bincount(inverse, weights=dv * dv)
+    slope = np.stack([np.bincount(inverse, weights=dv * r[:, k]) for k in range(2)], axis=1)
+    ok = (counts >= 6) & (svv > 0)
+    shear_stat = np.where(ok, (slope ** 2).sum(axis=1) / np.where(svv > 0, svv, 1.0) / s2 / 2.0, np.nan)
+    times = obs.frame_times_s[labels]
+    t_mid = 0.5 * (obs.frame_times_s[0] + obs.frame_times_s[-1])
+    halves = [times < t_mid, times >= t_mid]
+
+    def mean_of(x, mask):
+        x = x[mask & np.isfinite(x)]
+        return float(np.mean(x)) if len(x) else None
+
+    common_stat = counts * (group_means(frames, r)[3] ** 2).sum(axis=1) / s2 / 2.0
+    return {"image_field": chi_of_means(cells), "frame_common": mean_of(common_stat, np.ones(len(labels), bool)),
+            "frame_shear": mean_of(shear_stat, np.ones(len(labels), bool)),
+            "frame_common_halves": [mean_of(common_stat, m) for m in halves],
+            "frame_shear_halves": [mean_of(shear_stat, m) for m in halves]}
 
 
 def line_delay_evidence(result, *, frame_rate_hz: Optional[float] = None,
@@ -197,29 +237,53 @@ def line_delay_evidence(result, *, frame_rate_hz: Optional[float] = None,
     }
 
 
-def _physical(e: dict) -> Optional[Finding]:
-    """A readout longer than a frame, or a board at an impossible distance: the target's size."""
+def _readout_too_long(e: dict) -> Optional[str]:
     d, rows = e["line_delay_s"], e["rows"]
-    problems = []
     if d is not None and e["frame_interval_s"] and abs(d) * rows > e["frame_interval_s"]:
-        problems.append(f"a readout of {abs(d) * rows * 1e3:.1f} ms is longer than the frame interval "
-                        f"({e['frame_interval_s'] * 1e3:.1f} ms), which no video camera can do")
+        return (f"a readout of {abs(d) * rows * 1e3:.1f} ms is longer than the frame interval "
+                f"({e['frame_interval_s'] * 1e3:.1f} ms), which no video camera can do")
+    return None
+
+
+def _physical(e: dict) -> Optional[Finding]:
+    """An impossible board (the camera at an impossible distance from it, or impossible squares): the
+    target's size, said with a readout longer than a frame if there is one."""
     distance, square = e["board_distance_m"], e["square_m"]
+    problems = []
     if distance is not None and not DISTANCE_RANGE_M[0] <= distance <= DISTANCE_RANGE_M[1]:
         problems.append(f"the target's size puts the camera {distance:.3g} m from the board")
     elif square is not None and not SQUARE_RANGE_M[0] <= square <= SQUARE_RANGE_M[1]:
         problems.append(f"the target file's squares are {square:.3g} m")
     if not problems:
         return None
+    readout = _readout_too_long(e)
     size = "" if square is None else f" (it says squares of {square:.4g} m = {square * 1e3:.6g} mm)"
-    return Finding(TARGET_SIZE, NOT_TRUSTED, "; ".join(problems),
+    return Finding(TARGET_SIZE, NOT_TRUSTED, "; ".join(([readout] if readout else []) + problems),
                    f"check the square size in the target file first{size}: rowSpacingMeters and colSpacingMeters "
                    "are in metres (40 mm is 0.04)")
 
 
+def _structure(e: dict) -> tuple[float, float]:
+    rs = e.get("residual_structure") or {}
+    field, shear = rs.get("image_field"), rs.get("frame_shear")
+    return (0.0 if field is None else float(field)), (0.0 if shear is None else float(shear))
+
+
+def _camera_finding(e: dict, text: str) -> Finding:
+    advice = ("run again with --refine-intrinsics (the camera file becomes a prior and is refined with the "
+              "line delay)" if e["can_refine_intrinsics"] else "calibrate the camera again (rscalib intrinsics)")
+    return Finding(CAMERA, NOT_TRUSTED, text, advice)
+
+
 def _misfit_cause(e: dict) -> Finding:
-    """Why the model does not fit (J/2N high, or the halves disagree): the part of the video where it
-    fails, a low bitrate, or else the camera file."""
+    """Why the model does not fit (J/2N high, or the halves disagree), in this order: a fixed pattern
+    of the residuals over the image (the camera file); the misfit in one half of the video (its motion);
+    a shear per frame that the motion does not explain (a stabiliser); a low bitrate; else the camera."""
+    field, shear = _structure(e)
+    if field >= FIELD_CHI and field >= shear:
+        return _camera_finding(e, f"the residuals form a fixed pattern over the image (chi-square {field:.0f} "
+                               "per cell against about 1 for noise): the camera file (focal length, principal "
+                               "point or distortion) does not describe this camera")
     costs = [c for c in e["halves_cost"] if c is not None]
     if len(costs) == 2 and max(costs) > MAX_COST and max(costs) > HALF_COST_RATIO * min(costs):
         worse = int(np.argmax(costs))
@@ -229,14 +293,18 @@ def _misfit_cause(e: dict) -> Finding:
                        f"the trajectory does not follow the motion in the {('first', 'second')[worse]} half of the "
                        f"video{when}: J/2N {costs[worse]:.2f} there against {costs[1 - worse]:.2f}",
                        "move more smoothly (no vibration or jerks), or leave that part out with --start/--end")
+    if shear >= SHEAR_CHI:
+        return Finding(STABILISATION, NOT_TRUSTED,
+                       f"the frames are sheared in a way their motion does not explain (chi-square {shear:.0f} per "
+                       "frame against about 1 for noise): image stabilisation shifting each frame, or a video "
+                       "edited after recording",
+                       "turn off the phone's video stabilisation (and any 'smooth' or 'steady' mode), and use the "
+                       "camera's original file")
     bpp = e["bits_per_pixel"]
     if bpp is not None and bpp < LOW_BITS_PER_PIXEL:
         return Finding(COMPRESSION, NOT_TRUSTED, f"the video is compressed to {bpp:.2f} bit/pixel (re-encoded?)",
                        "use the camera's original file, or record at a higher quality setting")
-    advice = ("run again with --refine-intrinsics (the camera file becomes a prior and is refined with the "
-              "line delay)" if e["can_refine_intrinsics"] else "calibrate the camera again (rscalib intrinsics)")
-    return Finding(CAMERA, NOT_TRUSTED, "the first suspect is the camera file (focal length, principal point "
-                   "or distortion)", advice)
+    return _camera_finding(e, "the first suspect is the camera file (focal length, principal point or distortion)")
 
 
 def diagnose_evidence(e: dict) -> Diagnosis:
@@ -263,10 +331,15 @@ def diagnose_evidence(e: dict) -> Diagnosis:
     if e["halves_agree"] is False:
         misfit.append(f"the two halves of the video disagree by {e['halves_z']:.1f} sigma (the error bar is "
                       f"widened x{e['halves_z']:.1f})")
+    readout = None if physical is not None else _readout_too_long(e)
     if misfit:
         cause = _misfit_cause(e)
-        cause.text = "; ".join(misfit) + "; " + cause.text
+        cause.text = "; ".join(([readout] if readout else []) + misfit) + "; " + cause.text
         findings.append(cause)
+    elif readout:   # a plausible board, yet an impossible readout: the rows, or the board's size
+        findings.append(Finding(TARGET_SIZE, NOT_TRUSTED, readout,
+                                "check the square size in the target file and the rows read out (--rows)"))
+
     if e["frames_used"] < MIN_FRAMES_USED_FRACTION * e["frames_total"]:
         findings.append(Finding(COVERAGE, NOT_TRUSTED, f"only {e['frames_used']} of {e['frames_total']} frames "
                                 "were usable", "keep the whole board in view and sharp"))
@@ -279,11 +352,23 @@ def diagnose_evidence(e: dict) -> Diagnosis:
                                 "record longer, with the motion spread over the video"))
     d, data_std = e["line_delay_s"], e["data_std_s"]
     if data_std is not None and d and data_std > MAX_RELATIVE_STD * abs(d):
-        findings.append(Finding(MOTION, NOT_TRUSTED, f"the uncertainty is {data_std / abs(d) * 100:.1f} % of the "
-                                "estimate", "record longer or with faster motion"))
+        text = f"the uncertainty is {data_std / abs(d) * 100:.1f} % of the estimate"
+        bpp = e["bits_per_pixel"]
+        if bpp is not None and bpp < LOW_BITS_PER_PIXEL:
+            findings.append(Finding(COMPRESSION, NOT_TRUSTED, text + f", in a video compressed to {bpp:.2f} "
+                                    "bit/pixel (re-encoded?)", "use the camera's original file, or record at a "
+                                    "higher quality setting"))
+        else:
+            findings.append(Finding(MOTION, NOT_TRUSTED, text, "record longer or with faster motion"))
     if not e["converged"]:
         findings.append(Finding(SOLVER, NOT_TRUSTED, "the solver did not report convergence",
                                 "try --robust huber"))
+    field, _ = _structure(e)
+    if findings and field >= FIELD_CHI and findings[0].cause not in (TARGET_SIZE, CAMERA):
+        # a strong fixed pattern over the image: whatever else failed, the camera file is the first suspect
+        findings.insert(0, _camera_finding(e, f"the residuals form a fixed pattern over the image (chi-square "
+                                              f"{field:.0f} per cell against about 1 for noise): the camera file "
+                                              "does not describe this camera"))
     if cost is not None and cost < 1.0 / MAX_COST and not findings:
         findings.append(Finding(MOTION, "caveat", f"J/2N = {cost:.2f} is below 1: the noise model overestimates "
                                 "the detection noise, so sigma_d is on the safe side"))

@@ -50,9 +50,44 @@ def test_j2n_above_the_band_is_not_trusted_and_blames_the_camera_with_the_flag()
 
 
 def test_a_misfit_in_one_half_blames_the_motion_there():
-    d = judge.diagnose_evidence(evidence(normalised_cost=1.9, halves_cost=[0.9, 3.1], halves_agree=False,
-                                         halves_z=5.0))
+    d = judge.diagnose_evidence(evidence(normalised_cost=9.0, halves_cost=[0.6, 34.0], halves_agree=False,
+                                         halves_z=50.0))
     assert d.first_cause == judge.MOTION and "second half" in d.verdict.reasons[0]
+
+
+def structure(field=1.0, shear=1.0) -> dict:
+    return {"residual_structure": {"image_field": field, "frame_shear": shear}}
+
+
+def test_a_fixed_pattern_over_the_image_names_the_camera():
+    # the benchmark's principal point +15 px: J/2N 1.7, halves 3.7 sigma apart, chi-square 38 per image cell
+    d = judge.diagnose_evidence(evidence(normalised_cost=1.7, halves_cost=[1.4, 2.7], halves_agree=False,
+                                         halves_z=3.7, **structure(field=38.0, shear=13.0)))
+    assert d.first_cause == judge.CAMERA and "fixed pattern over the image" in d.verdict.reasons[0]
+    # named first whatever else failed (here only the self-check, inconclusive)
+    d = judge.diagnose_evidence(evidence(halves_agree=None, halves_z=None, **structure(field=60.0)))
+    assert d.first_cause == judge.CAMERA
+    # but not a reason on its own: a trusted run stays trusted
+    assert judge.diagnose_evidence(evidence(**structure(field=60.0))).verdict.trusted
+
+
+def test_a_shear_per_frame_the_motion_does_not_explain_names_stabilisation():
+    d = judge.diagnose_evidence(evidence(normalised_cost=3.0, halves_cost=[2.2, 4.9], **structure(field=1.9,
+                                                                                                  shear=21.0)))
+    assert d.first_cause == judge.STABILISATION and "stabilisation" in d.verdict.reasons[0]
+
+
+def test_a_low_bitrate_is_named_when_it_is_the_suspect():
+    d = judge.diagnose_evidence(evidence(data_std_s=0.75e-6, bits_per_pixel=0.04))
+    assert d.first_cause == judge.COMPRESSION and "0.04 bit/pixel" in d.verdict.reasons[0]
+
+
+def test_an_impossible_readout_with_a_plausible_board_blames_the_misfit():
+    # a stabilised 1280x720 video: 48 us/row x 720 rows = 34.7 ms in a 33.3 ms frame, a board 0.5 m away
+    d = judge.diagnose_evidence(evidence(line_delay_s=48.2e-6, rows=720, normalised_cost=10.4,
+                                         halves_cost=[8.6, 9.9], halves_agree=False, halves_z=10.9,
+                                         **structure(field=0.9, shear=27.5)))
+    assert d.first_cause == judge.STABILISATION and "34.7 ms" in d.verdict.reasons[0]
 
 
 def test_a_readout_longer_than_the_frame_names_the_target_size_first():
