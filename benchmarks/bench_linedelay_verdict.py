@@ -398,6 +398,8 @@ def main() -> int:
     parser.add_argument("--videos", type=Path, default=Path("/tmp/rscalib_bench_verdict"))
     parser.add_argument("--render", action="store_true", help="render missing videos, then stop")
     parser.add_argument("--rejudge", action="store_true", help="judge the stored evidence again, no solving")
+    parser.add_argument("--rerun-camera-check", action="store_true",
+                        help="solve again the stored runs the camera check would run on, then judge all again")
     parser.add_argument("--only", default=None, help="comma-separated video names")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
@@ -410,8 +412,20 @@ def main() -> int:
             render(case, videos)
             print(f"{case['name']}: {time.perf_counter() - started:.0f} s", flush=True)
         return 0
-    if args.rejudge:
-        rows = rejudge(json.loads(out_path.read_text())["runs"])
+    if args.rejudge or args.rerun_camera_check:
+        rows = json.loads(out_path.read_text())["runs"]
+        if args.rerun_camera_check:
+            # runs stored before the camera check existed: solve again only those it would run on
+            from rscalib.linedelay.judge import FIELD_CHI
+
+            by_name = {c["name"]: c for c in cases}
+            for i, row in enumerate(rows):
+                field = ((row.get("evidence") or {}).get("residual_structure") or {}).get("image_field")
+                if field is not None and field >= FIELD_CHI and "camera_check" not in row["evidence"]:
+                    rows[i] = run_one(by_name[row["name"]] | {"fault": row["fault"]}, videos, args.videos / "cache")
+                    print(json.dumps({k: rows[i].get(k) for k in ("name", "fault", "status", "z", "first_cause")}),
+                          flush=True)
+        rows = rejudge(rows)
     else:
         todo = runs_of(cases, args.faults_per_base)
         if args.only:

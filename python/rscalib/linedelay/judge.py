@@ -46,6 +46,9 @@ HALF_COST_RATIO = 4.0
 # camera faults 5-91 against at most 3.5 for every other run; stabilised 13-28 against at most 5.4.
 FIELD_CHI = 5.0
 SHEAR_CHI = 5.0
+# the camera check (pipeline.check_camera): refining the intrinsics moves d by this many of the data's
+# sigma -- the camera file matters at this video's precision
+CAMERA_SHIFT_SIGMA = 2.0
 # below this many bits per pixel the video was likely re-encoded (guidance.MIN_BITS_PER_PIXEL)
 LOW_BITS_PER_PIXEL = 0.15
 
@@ -198,12 +201,13 @@ def residual_structure(result) -> dict:
 
 
 def line_delay_evidence(result, *, frame_rate_hz: Optional[float] = None,
-                        bits_per_pixel: Optional[float] = None) -> dict:
+                        bits_per_pixel: Optional[float] = None, camera_check: Optional[dict] = None) -> dict:
     """The numbers the verdict judges, JSON-ready: the estimate and its sigmas (the data's, before the
     halves' widening, and the widened one), J/2N of the whole video and of each half, the halves' z,
     coverage, the physical quantities (readout against the frame interval, the camera-board distance,
     the target's square size) and the bitrate. frame_rate_hz: of a video (None for frames without a
-    rate: no readout limit); bits_per_pixel: the video file's (io.video.video_bits_per_pixel)."""
+    rate: no readout limit); bits_per_pixel: the video file's (io.video.video_bits_per_pixel);
+    camera_check: pipeline.check_camera's (d with the intrinsics refined), when it ran."""
     check = getattr(result, "self_check", None) or {}
     widen = float(check.get("widen") or 1.0)
     std = _finite(result.line_delay_std_s)
@@ -232,6 +236,7 @@ def line_delay_evidence(result, *, frame_rate_hz: Optional[float] = None,
         "square_m": None if target_points is None else target_spacing_m(target_points),
         "bits_per_pixel": _finite(bits_per_pixel),
         "residual_structure": residual_structure(result),
+        "camera_check": camera_check,
         "intrinsics_refined": getattr(result, "intrinsics", None) is not None,
         "can_refine_intrinsics": hasattr(result, "intrinsics") and getattr(result, "intrinsics", None) is None,
     }
@@ -318,6 +323,11 @@ def diagnose_evidence(e: dict) -> Diagnosis:
         findings.append(Finding(MOTION, NOT_DETERMINED, f"the data do not determine the line delay ({why})",
                                 "too little motion, or the wrong kind: move the camera faster, mostly rotating "
                                 "about its vertical axis"))
+        field, shear = _structure(e)
+        if field >= FIELD_CHI and field >= shear:   # the misfit of a wrong camera file inflates the noise
+            findings.insert(0, _camera_finding(e, f"the residuals form a fixed pattern over the image (chi-square "
+                                                  f"{field:.0f} per cell against about 1 for noise): the camera "
+                                                  "file does not describe this camera"))
         if physical is not None:
             findings.insert(0, physical)
         return Diagnosis(Verdict(NOT_DETERMINED, "Line delay not determined by this video.",
@@ -340,6 +350,12 @@ def diagnose_evidence(e: dict) -> Diagnosis:
         findings.append(Finding(TARGET_SIZE, NOT_TRUSTED, readout,
                                 "check the square size in the target file and the rows read out (--rows)"))
 
+    check = e.get("camera_check") or {}
+    shift = check.get("shift_sigma")
+    if shift is not None and abs(shift) >= CAMERA_SHIFT_SIGMA and not any(f.cause == CAMERA for f in findings):
+        findings.append(_camera_finding(e, f"refining the camera's intrinsics with the line delay moves d by "
+                                           f"{shift:+.1f} sigma (to {_us(check['line_delay_s'])} us/row): the camera "
+                                           "file does not describe this camera well enough for this video"))
     if e["frames_used"] < MIN_FRAMES_USED_FRACTION * e["frames_total"]:
         findings.append(Finding(COVERAGE, NOT_TRUSTED, f"only {e['frames_used']} of {e['frames_total']} frames "
                                 "were usable", "keep the whole board in view and sharp"))
@@ -363,8 +379,8 @@ def diagnose_evidence(e: dict) -> Diagnosis:
     if not e["converged"]:
         findings.append(Finding(SOLVER, NOT_TRUSTED, "the solver did not report convergence",
                                 "try --robust huber"))
-    field, _ = _structure(e)
-    if findings and field >= FIELD_CHI and findings[0].cause not in (TARGET_SIZE, CAMERA):
+    field, shear = _structure(e)
+    if findings and field >= FIELD_CHI and field >= shear and findings[0].cause not in (TARGET_SIZE, CAMERA):
         # a strong fixed pattern over the image: whatever else failed, the camera file is the first suspect
         findings.insert(0, _camera_finding(e, f"the residuals form a fixed pattern over the image (chi-square "
                                               f"{field:.0f} per cell against about 1 for noise): the camera file "
@@ -383,10 +399,13 @@ def diagnose_evidence(e: dict) -> Diagnosis:
     return Diagnosis(verdict, findings, e)
 
 
-def diagnose(result, *, frame_rate_hz: Optional[float] = None, bits_per_pixel: Optional[float] = None) -> Diagnosis:
+def diagnose(result, *, frame_rate_hz: Optional[float] = None, bits_per_pixel: Optional[float] = None,
+             camera_check: Optional[dict] = None) -> Diagnosis:
     """The verdict of a line-delay result (LineDelayResult or LinearInterpResult, with its self-check
-    when run) with its findings; frame_rate_hz and bits_per_pixel of the video when known."""
-    return diagnose_evidence(line_delay_evidence(result, frame_rate_hz=frame_rate_hz, bits_per_pixel=bits_per_pixel))
+    when run) with its findings; frame_rate_hz and bits_per_pixel of the video when known, and the
+    camera check of pipeline.check_camera when it ran."""
+    return diagnose_evidence(line_delay_evidence(result, frame_rate_hz=frame_rate_hz, bits_per_pixel=bits_per_pixel,
+                                                 camera_check=camera_check))
 
 
 def judge_line_delay(result, *, frame_rate_hz: Optional[float] = None,

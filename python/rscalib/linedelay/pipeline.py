@@ -43,7 +43,7 @@ from .common import (
     require_frame_times,
 )
 from .guidance import capture_guidance
-from .judge import Diagnosis, diagnose
+from .judge import FIELD_CHI, Diagnosis, diagnose, residual_structure
 from .linear import LinearInterpResult, calibrate_line_delay_linear
 from .options import LineDelayOptions, LocalizeOptions
 from .pnp import PnpTrajectory, compare_with_pnp, per_frame_pnp, pnp_trajectory
@@ -212,14 +212,43 @@ def calibrate_video(video: VideoInput, target: Union[None, PathLike, Target] = N
     inputs = {"video": None if video_path is None else str(video_path),
               "target": None if target is None or isinstance(target, Target) else str(target),
               "camera": None if camera_path is None else str(camera_path)}
+    camera_check = None
+    if options.baseline is None and not options.refine_intrinsics and readout == TOP_TO_BOTTOM:
+        camera_check = check_camera(observations, solve_camera, options, result)
     bits_per_pixel = video_bits_per_pixel(video_path) if video_path else None
     try:
         guidance = capture_guidance(result, detection, bits_per_pixel)
     except Exception as error:  # noqa: BLE001 - advice must never cost the result
         guidance = {"advice": [], "error": f"{type(error).__name__}: {error}"}
-    diagnosis = diagnose(result, frame_rate_hz=_frame_rate_or_none(result), bits_per_pixel=bits_per_pixel)
+    diagnosis = diagnose(result, frame_rate_hz=_frame_rate_or_none(result), bits_per_pixel=bits_per_pixel,
+                         camera_check=camera_check)
     return LineDelayRun(result, diagnosis.verdict, camera_model, detection, options, readout, inputs, guidance,
                         diagnosis)
+
+
+def check_camera(observations: Observations, camera: CameraModel, options: LineDelayOptions,
+                 result: LineDelayResult) -> Optional[dict]:
+    """When the residuals form a fixed pattern over the image (judge.residual_structure, image_field
+    >= judge.FIELD_CHI), the whole video solved once more with the intrinsics refined (formulation §14,
+    from the solved trajectory and d): how far d moves, in the data's sigma, says whether the camera
+    file matters here (docs/formulation.md §17). None when there is no such pattern (nothing is solved)
+    or d is not determined."""
+    if not result.determined:
+        return None
+    field = residual_structure(result)["image_field"]
+    if field is None or field < FIELD_CHI:
+        return None
+    try:
+        refined = calibrate_line_delay(observations, camera, replace(options, refine_intrinsics=True),
+                                       frame_poses=result.frame_poses, start_trajectory=result.trajectory,
+                                       line_delay0_s=result.line_delay_s)
+    except InputError as error:
+        return {"error": str(error)}
+    # the data's sigma: before the halves' widening (with the noise model's inflation, §8)
+    data_std = result.line_delay_std_s / max(1.0, float((result.self_check or {}).get("widen") or 1.0))
+    return {"image_field": field, "line_delay_s": float(refined.line_delay_s),
+            "line_delay_std_s": float(refined.line_delay_std_s), "normalised_cost": float(refined.normalised_cost),
+            "shift_sigma": float((refined.line_delay_s - result.line_delay_s) / data_std) if data_std > 0 else None}
 
 
 def _frame_rate_or_none(result) -> Optional[float]:
