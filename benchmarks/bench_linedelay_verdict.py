@@ -437,7 +437,7 @@ def main() -> int:
                 continue
             row = run_one(run, videos, args.videos / "cache")
             rows.append(row)
-            partial = out_path.with_suffix(".partial.json")
+            partial = Path("/tmp") / (out_path.stem + ".partial.json")
             partial.parent.mkdir(parents=True, exist_ok=True)
             partial.write_text(json.dumps({"runs": rows}, default=str))
             print(json.dumps({k: row.get(k) for k in ("name", "fault", "status", "z", "first_cause", "seconds")}
