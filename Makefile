@@ -56,7 +56,7 @@ test-python: install
 
 # Style is checked, not hoped for: ruff (pyproject.toml) and clang-format (.clang-format).
 lint: deps venv
-	$(VENV)/bin/ruff check python tests benchmarks
+	$(VENV)/bin/ruff check python tests benchmarks experiments
 	bash scripts/check-format.sh
 
 test: lint test-cpp test-python test-wheel

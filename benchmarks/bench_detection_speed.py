@@ -106,26 +106,6 @@ def rate(source, target, options) -> tuple[float, object]:
     return result.frames_total / (time.perf_counter() - started), result
 
 
-def mpeg4(folder: Path) -> Path:
-    """The render re-encoded as MPEG-4 Part 2 (OpenCV's "mp4v" writer; cached)."""
-    out = folder / "video_mp4v.mp4"
-    if not out.is_file():
-        capture = cv2.VideoCapture(str(folder / "video.avi"), cv2.CAP_FFMPEG)
-        writer = None
-        while True:
-            ok, image = capture.read()
-            if not ok:
-                break
-            gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-            if writer is None:
-                writer = cv2.VideoWriter(str(out), cv2.CAP_FFMPEG, cv2.VideoWriter_fourcc(*"mp4v"), 30.0,
-                                         gray.shape[::-1], False)
-            writer.write(gray)
-        writer.release()
-        capture.release()
-    return out
-
-
 def cpu_ms_per_frame(video: Path, target, frames: int = 200) -> dict:
     """CPU time per frame in this process (all its threads): decode, full, tracked detection."""
     started, images = time.process_time(), []
@@ -241,7 +221,7 @@ def main() -> int:
         folder = render(args.videos / f"speed_{size}_{seconds}s", ["--size", size, "--duration", seconds,
                                                                     "--seed", str(seed)])
         for codec in codecs.split("+"):
-            video = folder / "video.avi" if codec == "ffv1" else mpeg4(folder)
+            video = folder / "video.avi" if codec == "ffv1" else _common.mpeg4(folder)
             row = {"codec": codec, **speed_row(folder, video, args.naive_frames)}
             speed.append(row)
             print(row, flush=True)

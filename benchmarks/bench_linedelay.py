@@ -22,6 +22,10 @@ import rscalib
 from rscalib.linedelay.spline import calibrate_line_delay
 from rscalib.sim import target_observations as simulate
 
+# The solve alone, as `rscalib linedelay` runs it over the whole video (the engine's speed and accuracy;
+# the front door adds the self-check's two halves: rscalib.calibrate_video).
+OPTIONS = rscalib.LineDelayOptions()
+
 
 def camera_for(sim) -> rscalib.CameraModel:
     c = sim.camera
@@ -34,7 +38,7 @@ def accuracy(seeds: int, line_delays_s, duration_s: float) -> list[dict]:
         for seed in range(seeds):
             sim = simulate.simulate_default(line_delay_s=d, duration_s=duration_s, seed=1000 + seed, noise_px=0.3)
             started = time.perf_counter()
-            res = calibrate_line_delay(sim.observations, camera_for(sim))
+            res = calibrate_line_delay(sim.observations, camera_for(sim), OPTIONS)
             rows.append(dict(d_true_s=d, seed=1000 + seed, d_est_s=res.line_delay_s, std_s=res.line_delay_std_s,
                              normalised_cost=res.normalised_cost, pixel_sigma=res.pixel_sigma,
                              segments=res.num_segments, seconds=time.perf_counter() - started))
@@ -49,7 +53,7 @@ def speed(durations_s) -> list[dict]:
     for duration in durations_s:
         sim = simulate.simulate_default(line_delay_s=30e-6, duration_s=duration, seed=7, noise_px=0.3)
         started = time.perf_counter()
-        res = calibrate_line_delay(sim.observations, camera_for(sim))
+        res = calibrate_line_delay(sim.observations, camera_for(sim), OPTIONS)
         rows.append(dict(duration_s=duration, frames=res.frames_used, observations=res.observations,
                          segments=res.num_segments, rounds=len(res.history),
                          iterations=int(sum(h.iterations for h in res.history)),

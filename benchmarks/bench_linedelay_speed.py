@@ -5,7 +5,7 @@
 For each duration: a rendered 30 fps, 640x480, 9x6-checkerboard video of a hand-held camera
 (`rscalib simulate --supersample 1 --seed 1`, cached in --videos; codec "ffv1" is the lossless render,
 slow to decode, "mp4v" the same frames re-encoded as MPEG-4 Part 2, closer to a phone's decode cost:
-bench_detection_speed.mpeg4), then, one after the other:
+benchmarks/_common.mpeg4), then, one after the other:
   (a) decode only (FrameSource.frames(gray=True), the reader detection uses);
   (b) the naive single-process loop: decode + cv2.findChessboardCornersSB on every frame
       (only for --naive-durations: 50 s a minute of video), --naive-repeats times (3): the ratio is
@@ -30,7 +30,6 @@ from pathlib import Path
 import _common  # noqa: E402  (benchmarks/_common.py: machine record, results file)
 import cv2
 import numpy as np
-from bench_detection_speed import mpeg4
 
 from rscalib.io.video import open_source
 
@@ -88,6 +87,8 @@ def linedelay_run(folder: Path, video: Path, out: Path, report: bool) -> dict:
         peak_kb = int(peak_file.read_text().split()[-1])
         peak_file.unlink()
     result = json.loads((out / "result.json").read_text()) if (out / "result.json").exists() else {}
+    if result.get("line_delay_s") is None and result.get("not_claimed"):   # not determined: the estimate, unclaimed
+        result |= result["not_claimed"]
     truth = json.loads((folder / "truth.json").read_text())
     return {"wall_s": wall, "exit": proc.returncode, "peak_rss_mb": peak_kb / 1024,
             "line_delay_us": 1e6 * result.get("line_delay_s", float("nan")),
@@ -112,7 +113,7 @@ def main() -> None:
     for duration in durations:
         folder = render(args.videos, duration)
         for codec in args.codecs.split(","):
-            video = folder / "video.avi" if codec == "ffv1" else mpeg4(folder)
+            video = folder / "video.avi" if codec == "ffv1" else _common.mpeg4(folder)
             row = {"duration_s": duration, "codec": codec}
             row["decode_s"], row["frames"] = decode_only_s(video)
             if duration in naive:

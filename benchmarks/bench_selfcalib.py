@@ -1,5 +1,6 @@
 """Self-calibration benchmark (issue 5; docs/benchmarks.md): rendered textured-room sequences through the
-image front end and the SOG bank. Per sequence: error of each parameter, whether the truth is in
+engine of `rscalib selfcalib` (rscalib.selfcalib.engine.calibrate_frames with SelfCalibOptions(): the
+image front end, the SOG bank and the bundle adjustment over its tracks). Per sequence: error of each parameter, whether the truth is in
 the 99 % bounds, Gaussians left, the frame the bank collapses to one Gaussian, frames/s.
 
 Usage: .venv/bin/python benchmarks/bench_selfcalib.py [--sequences 10] [--frames 150]
@@ -16,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 import rscalib
-from rscalib.selfcalib.calibrate import PARAM_NAMES, self_calibrate
+from rscalib.selfcalib.engine import calibrate_frames, sog_options
+from rscalib.selfcalib.result import PARAM_NAMES
 from rscalib.sim.scene_video import render_scene_frames
 
 
@@ -39,11 +41,12 @@ def main() -> None:
             fps_trace.append((bank.num_gaussians, now - last[0]))
             last[0] = now
 
-        options = rscalib._core.SogOptions()
+        method = rscalib.SelfCalibOptions()
+        options = sog_options(method)
         if args.pixel_sigma is not None:
             options.pixel_sigma = args.pixel_sigma
-        result = self_calibrate(zip(frames.timestamps_s, frames.images), (frames.camera.width, frames.camera.height),
-                                options=options, on_frame=on_frame)
+        result = calibrate_frames(zip(frames.timestamps_s, frames.images), (frames.camera.width, frames.camera.height),
+                                  method, sog=options, on_frame=on_frame)
         inside = [bool(result.bounds_99[i, 0] <= truth[i] <= result.bounds_99[i, 1]) for i in range(5)]
         many = [dt for n, dt in fps_trace[1:] if n > 50]
         one = [dt for n, dt in fps_trace[1:] if n == 1]

@@ -12,8 +12,9 @@ import sys
 import time
 from pathlib import Path
 
-from rscalib import _core
-from rscalib.selfcalib.calibrate import read_gray_frames, self_calibrate
+import rscalib
+from rscalib.io.video import read_gray_frames
+from rscalib.selfcalib.engine import calibrate_frames, sog_options
 
 VIDEO = Path(__file__).resolve().parents[2] / "shared" / "data" / "real_selfcalib_s3phone" / "escritorio_traslacion.mp4"
 
@@ -24,7 +25,8 @@ def main() -> None:
     images = [image for _, image in read_gray_frames(VIDEO).frames][::step]
     loop = images + images[-2:0:-1]
     frames = [(k / 30.0, loop[k % len(loop)]) for k in range(count)]
-    options = _core.SogOptions()
+    method = rscalib.SelfCalibOptions(pixel_size_mm=0.0070216, restarts=False)
+    options = sog_options(method)
     if cap is not None:
         options.max_features = cap
     started = time.time()
@@ -34,8 +36,7 @@ def main() -> None:
         maps.append(bank.num_features)
         clocks.append((bank.num_gaussians, time.perf_counter(), time.process_time()))
 
-    result = self_calibrate(frames, (640, 480), pixel_size_mm=0.0070216, options=options, on_frame=on_frame,
-                            restarts=False)
+    result = calibrate_frames(frames, (640, 480), method, sog=options, on_frame=on_frame)
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     elapsed = time.time() - started
     print(f"step {step}, {count} frames, max_features {options.max_features}: map max {max(maps)}, "

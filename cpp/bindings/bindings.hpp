@@ -20,6 +20,7 @@ void BindCamera(py::module_& m);
 void BindRs(py::module_& m);
 void BindRsLinear(py::module_& m);
 void BindSog(py::module_& m);
+void BindBundle(py::module_& m);
 
 // Rows of a (count, width) or (width,) array; throws InputError on other shapes.
 // Sets *was_vector when the input was 1-D so results can be returned 1-D too.

@@ -105,7 +105,7 @@ PYBIND11_MODULE(_core, m) {
   namespace py = pybind11;
   m.doc() =
       "C++ core of rscalib: B-spline trajectories, camera models, the rolling-shutter solver and "
-      "the SOG filter bank.";
+      "the SOG filter bank and the self-calibration bundle adjustment.";
   m.attr("__version__") = RSCALIB_VERSION;
   py::register_exception<rscalib::InputError>(m, "InputError", PyExc_ValueError);
   rscalib::python::BindSpline(m);
@@ -114,4 +114,5 @@ PYBIND11_MODULE(_core, m) {
   rscalib::python::BindRs(m);
   rscalib::python::BindRsLinear(m);
   rscalib::python::BindSog(m);
+  rscalib::python::BindBundle(m);
 }

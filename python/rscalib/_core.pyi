@@ -1,12 +1,12 @@
 """
-C++ core of rscalib: B-spline trajectories, camera models, the rolling-shutter solver and the SOG filter bank.
+C++ core of rscalib: B-spline trajectories, camera models, the rolling-shutter solver and the SOG filter bank and the self-calibration bundle adjustment.
 """
 from __future__ import annotations
 import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BSpline', 'CameraModel', 'InputError', 'LinearInterpOptions', 'LinearInterpSummary', 'RsSolveSummary', 'RsSolverOptions', 'SogBank', 'SogOptions', 'SogUpdateReport', 'error_noise_map', 'evaluate_line_delay', 'evaluate_rs_cost', 'fit_bspline', 'linear_interp_pose_state', 'poses_at', 'rotation_matrix_to_vector', 'rotation_vector_to_matrix', 'solve_line_delay', 'solve_line_delay_linear', 'standardisation_weight', 'unwrap_rotation_vectors']
+__all__: list[str] = ['BSpline', 'BundleOptions', 'BundleResult', 'CameraModel', 'InputError', 'LinearInterpOptions', 'LinearInterpSummary', 'RsSolveSummary', 'RsSolverOptions', 'SogBank', 'SogOptions', 'SogUpdateReport', 'error_noise_map', 'evaluate_line_delay', 'evaluate_rs_cost', 'fit_bspline', 'linear_interp_pose_state', 'poses_at', 'rotation_matrix_to_vector', 'rotation_vector_to_matrix', 'solve_bundle', 'solve_line_delay', 'solve_line_delay_linear', 'standardisation_weight', 'unwrap_rotation_vectors']
 class InputError(ValueError):
     pass
 class BSpline:
@@ -954,6 +954,210 @@ class SogBank:
     @property
     def weights(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
         ...
+class BundleOptions:
+    """
+    Options of the self-calibration bundle adjustment (docs/sog.md §22).
+    """
+    compute_covariance: bool
+    def __init__(self) -> None:
+        ...
+    @property
+    def beyond_infinity_limit(self) -> float:
+        """
+        rho >= -beyond_infinity_limit x the median start rho (< 0: no bound)
+        """
+    @beyond_infinity_limit.setter
+    def beyond_infinity_limit(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def function_tolerance(self) -> float:
+        ...
+    @function_tolerance.setter
+    def function_tolerance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def gradient_tolerance(self) -> float:
+        ...
+    @gradient_tolerance.setter
+    def gradient_tolerance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def linear_solver(self) -> str:
+        """
+        sparse_schur (SuiteSparse) | dense_schur | iterative_schur
+        """
+    @linear_solver.setter
+    def linear_solver(self, arg0: str) -> None:
+        ...
+    @property
+    def max_iterations(self) -> int:
+        ...
+    @max_iterations.setter
+    def max_iterations(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def near_limit(self) -> float:
+        """
+        a point stays farther from its anchor than near_limit x the median start depth (<= 0: no bound)
+        """
+    @near_limit.setter
+    def near_limit(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def num_threads(self) -> int:
+        ...
+    @num_threads.setter
+    def num_threads(self, arg1: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def parameter_tolerance(self) -> float:
+        ...
+    @parameter_tolerance.setter
+    def parameter_tolerance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def prior_pixel_sigma_px(self) -> float:
+        """
+        the pixel noise a line-delay prior is weighed against, px
+        """
+    @prior_pixel_sigma_px.setter
+    def prior_pixel_sigma_px(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def robust_loss(self) -> str:
+        """
+        none | huber | cauchy | soft_l1 (Ceres' losses of |r|^2 per observation)
+        """
+    @robust_loss.setter
+    def robust_loss(self, arg0: str) -> None:
+        ...
+    @property
+    def robust_loss_scale_px(self) -> float:
+        """
+        where the loss leaves its quadratic part, px
+        """
+    @robust_loss_scale_px.setter
+    def robust_loss_scale_px(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def scale_keyframe(self) -> int:
+        """
+        the keyframe whose distance from the first is held; -1: the farthest
+        """
+    @scale_keyframe.setter
+    def scale_keyframe(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def verbose(self) -> bool:
+        """
+        Ceres' iteration log to stdout
+        """
+    @verbose.setter
+    def verbose(self, arg0: bool) -> None:
+        ...
+class BundleResult:
+    """
+    The adjusted camera, line delay, poses and points; Ceres' summary; the covariances of the globals (camera parameters, then the line delay in s/row; zero rows where held).
+    """
+    @property
+    def camera_params(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
+    def converged(self) -> bool:
+        ...
+    @property
+    def covariance_model(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]:
+        ...
+    @property
+    def covariance_ok(self) -> bool:
+        ...
+    @property
+    def covariance_time_s(self) -> float:
+        ...
+    @property
+    def covariance_tracks(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]:
+        ...
+    @property
+    def covariance_two_way(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]:
+        ...
+    @property
+    def dof(self) -> int:
+        ...
+    @property
+    def dropped_observations(self) -> int:
+        ...
+    @property
+    def dropped_points(self) -> int:
+        ...
+    @property
+    def final_cost(self) -> float:
+        ...
+    @property
+    def initial_cost(self) -> float:
+        ...
+    @property
+    def inlier(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"]:
+        """
+        (N) |r| <= the loss scale
+        """
+    @property
+    def iterations(self) -> int:
+        ...
+    @property
+    def keyframe_poses(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 6]"]:
+        """
+        (K, 6) [p; phi] T_cw
+        """
+    @property
+    def line_delay_s(self) -> float:
+        ...
+    @property
+    def message(self) -> str:
+        ...
+    @property
+    def points(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 3]"]:
+        """
+        (P, 3) (a, b, rho) in their anchors
+        """
+    @property
+    def points_at_bounds(self) -> int:
+        """
+        points whose rho ended at a bound (near_limit, beyond_infinity_limit)
+        """
+    @property
+    def points_beyond_infinity(self) -> int:
+        ...
+    @property
+    def remaining_step(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
+    def residuals_px(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]"]:
+        """
+        (N, 2) uv - prediction; NaN where not used
+        """
+    @property
+    def rms_px(self) -> float:
+        ...
+    @property
+    def scale_keyframe(self) -> int:
+        ...
+    @property
+    def sigma_px(self) -> float:
+        ...
+    @property
+    def solve_time_s(self) -> float:
+        ...
+    @property
+    def step_sigma(self) -> float:
+        ...
+    @property
+    def termination(self) -> str:
+        ...
+    @property
+    def used(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"]:
+        """
+        (N) false: dropped at the start
+        """
 def error_noise_map(line_delay_s: typing.SupportsFloat | typing.SupportsIndex, image_velocity_px_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[2, 1]"]) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[2, 2]"]:
     """
     A = I - d [[0, u_dot], [0, v_dot]] (Oth et al. 2013, eq. 15-21; docs/formulation.md §4).
@@ -984,6 +1188,10 @@ def rotation_matrix_to_vector(rotation: typing.Annotated[numpy.typing.ArrayLike,
     ...
 def rotation_vector_to_matrix(rotation_vector: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[3, 1]"]) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[3, 3]"]:
     ...
+def solve_bundle(camera: CameraModel, keyframe_poses: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], observation_keyframe: numpy.ndarray, observation_point: numpy.ndarray, uv_px: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], image_velocity_px_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], point_anchor: numpy.ndarray, points: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], free_intrinsics: collections.abc.Sequence[bool] | None = None, line_delay_s: typing.SupportsFloat | typing.SupportsIndex = 0.0, estimate_line_delay: bool = False, line_delay_prior: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex] | None = None, reference_row: typing.SupportsFloat | typing.SupportsIndex = 0.0, options: BundleOptions = ...) -> BundleResult:
+    """
+    The self-calibration bundle adjustment (docs/sog.md §22): keyframe_poses (K, 6) [p; phi] T_cw; per observation its keyframe, point, uv_px (N, 2) and image_velocity_px_s (N, 2); per point its anchor keyframe and (a, b, rho) (P, 3). free_intrinsics: per camera parameter (None: all). The line delay (s/row) is held at line_delay_s, estimated from it (estimate_line_delay), or estimated with a Gaussian prior (mean_s, sigma_s). reference_row: v_ref of the rolling-shutter shift. Returns a BundleResult.
+    """
 def solve_line_delay(frame_time_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], uv: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], point_w: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 3]"], camera: CameraModel, trajectory: BSpline, line_delay_s: typing.SupportsFloat | typing.SupportsIndex, options: RsSolverOptions) -> RsSolveSummary:
     """
     Refines trajectory (in place) and the line delay; returns an RsSolveSummary.

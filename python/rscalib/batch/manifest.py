@@ -20,8 +20,10 @@ import re
 import shlex
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable, Optional
 
 from ..errors import InputError
+from ..io.safe_parse import load_yaml, one_line, read_text
 
 # command -> its options that name input files (hashed and resolved like `input`)
 INPUT_OPTIONS = {"linedelay": ("target", "camera"), "intrinsics": ("target",), "flicker": (), "selfcalib": ()}
@@ -32,6 +34,10 @@ META_FIELDS = ("id", "command", "input", "mode", "args")
 # Commands whose detection starts a process per core unless told: in a batch the jobs are the parallelism.
 DETECTION_COMMANDS = ("linedelay", "intrinsics")
 _ID_CHARS = re.compile(r"[^A-Za-z0-9._-]+")
+# 10 000 jobs of a few hundred bytes each are a few MB; a larger file is refused before it is read.
+MANIFEST_MAX_BYTES = 64 * 2 ** 20
+# YAML is read by pure Python (seconds per MB): a YAML manifest of ~20 000 jobs; larger ones as CSV.
+MANIFEST_YAML_MAX_BYTES = 4 * 2 ** 20
 
 
 @dataclass(frozen=True)
@@ -54,9 +60,18 @@ class Job:
         return hashlib.sha256(text.encode()).hexdigest()
 
 
-def load_manifest(path) -> list:
-    """Jobs of a CSV or YAML manifest; InputError naming the file, row and field on any problem."""
-    path = Path(path)
+def load_manifest(path, parse_args: Optional[Callable[[list], object]] = None) -> list:
+    """Jobs of a CSV or YAML manifest; InputError naming the file, row and field on any problem.
+    parse_args: the commands' argument parser (argparse's parse_args of `rscalib`); with it every row
+    is checked as the command would check it (`rscalib batch` passes the CLI's; batch never imports
+    cli), without it only the manifest's own fields are."""
+    try:
+        return _load_manifest(Path(path), parse_args)
+    except InputError as error:
+        raise InputError(one_line(str(error))) from None
+
+
+def _load_manifest(path: Path, parse_args) -> list:
     if not path.is_file():
         raise InputError(f"manifest not found: {path}")
     suffix = path.suffix.lower()
@@ -70,7 +85,7 @@ def load_manifest(path) -> list:
         raise InputError(f"{path}: no jobs")
     jobs, seen = [], {}
     for number, (where, fields) in enumerate(rows, start=1):
-        job = _job(path, number, where, fields)
+        job = _job(path, number, where, fields, parse_args)
         if job.id in seen:
             raise InputError(f"{path}: {where}: field 'id': '{job.id}' is also the id of row {seen[job.id]}"
                              + ("" if "id" in fields else " (give each row an id)"))
@@ -80,11 +95,18 @@ def load_manifest(path) -> list:
 
 
 def _text(path: Path) -> str:
+    """The manifest's text: UTF-8, with or without the byte-order mark spreadsheet programs write."""
     try:
-        return path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as error:
-        raise InputError(f"{path}: not UTF-8 text (byte {error.start}); a manifest is a .csv or .yaml text file") \
-            from None
+        return read_text(path, MANIFEST_MAX_BYTES, "manifest", encoding="utf-8-sig", errors="strict")
+    except InputError as error:
+        if "not UTF-8" in str(error):
+            raise InputError(f"{error}; a manifest is a .csv or .yaml text file") from None
+        raise
+
+
+def _field_name(name: str) -> str:
+    """A column or key as the manifest means it: `--pixel_size_mm ` is `pixel-size-mm`."""
+    return name.strip().lstrip("-").replace("_", "-")
 
 
 def _csv_rows(path: Path) -> list:
@@ -92,6 +114,13 @@ def _csv_rows(path: Path) -> list:
     try:
         if not reader.fieldnames or "command" not in [n.strip() for n in reader.fieldnames]:
             raise InputError(f"{path}: line 1: the header needs a 'command' column (and 'input')")
+        seen = {}
+        for column, name in enumerate(reader.fieldnames, start=1):
+            key = _field_name(name)
+            if key and key in seen:
+                raise InputError(f"{path}: line 1: column {column} '{name.strip()}' repeats column {seen[key]} "
+                                 f"'{reader.fieldnames[seen[key] - 1].strip()}' (one column per field)")
+            seen[key] = column
         rows = []
         for record in reader:
             if None in record:
@@ -105,13 +134,8 @@ def _csv_rows(path: Path) -> list:
 
 
 def _yaml_rows(path: Path) -> list:
-    import yaml
-
-    try:
-        data = yaml.safe_load(_text(path))
-    except yaml.YAMLError as error:
-        first = str(error).splitlines()[0] if str(error) else type(error).__name__
-        raise InputError(f"{path}: not valid YAML: {first}") from None
+    # aliases are allowed (a manifest may share values with &name / *name), within a size budget
+    data = load_yaml(_text(path), path, aliases=True, max_bytes=MANIFEST_YAML_MAX_BYTES)
     defaults = {}
     if isinstance(data, dict):
         defaults = data.get("defaults") or {}
@@ -155,13 +179,13 @@ def _option_args(flag: str, value, is_path: bool, base: Path) -> list:
     return [flag, str(value)]
 
 
-def _job(path: Path, number: int, where: str, fields: dict) -> Job:
+def _job(path: Path, number: int, where: str, fields: dict, parse_args) -> Job:
     base = path.parent
 
     def bad(field: str, message: str) -> InputError:
         return InputError(f"{path}: {where}: field '{field}': {message}")
 
-    fields = {k.strip().lstrip("-").replace("_", "-"): v for k, v in fields.items() if k is not None}
+    fields = {_field_name(k): v for k, v in fields.items() if k is not None}
     for name, value in fields.items():
         if "\0" in str(value):
             raise bad(name, "has a NUL character (not a path or a value)")
@@ -197,7 +221,8 @@ def _job(path: Path, number: int, where: str, fields: dict) -> Job:
     if command in DETECTION_COMMANDS and "--workers" not in argv:
         argv += ["--workers", "1"]
     argv.append("--quiet")
-    _check_with_parser(argv, bad)
+    if parse_args is not None:
+        _check_with_parser(argv, bad, parse_args)
     job_id = str(fields.get("id") or "").strip()
     if job_id:
         if _ID_CHARS.search(job_id) or job_id.startswith("."):
@@ -210,14 +235,12 @@ def _job(path: Path, number: int, where: str, fields: dict) -> Job:
     return Job(job_id, number, command, mode, tuple(input_paths), tuple(argv))
 
 
-def _check_with_parser(argv: list, bad) -> None:
+def _check_with_parser(argv: list, bad, parse_args: Callable[[list], object]) -> None:
     """Parse the row with the command's own parser; its complaint becomes one line naming the field."""
-    from ..cli import build_parser
-
     messages = io.StringIO()
     try:
         with contextlib.redirect_stderr(messages), contextlib.redirect_stdout(io.StringIO()):
-            build_parser().parse_args([*argv, "--out", "."])
+            parse_args([*argv, "--out", "."])
     except SystemExit:
         text = messages.getvalue().strip().splitlines()
         message = text[-1].split("error: ", 1)[-1] if text else "not accepted by the command"

@@ -14,11 +14,11 @@ file system).
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import itertools
 import os
 import shlex
-import shutil
 import signal
 import socket
 import subprocess
@@ -30,12 +30,18 @@ from typing import Callable, Optional
 
 from .._version import __version__
 from ..errors import InputError
-from .child import PARENT_PID_ENV
+from ..io.output_folder import remove_output_set
+from ..io.safe_parse import one_line, shown
 from .manifest import load_manifest
 from .outcome import read_outcome
-from .store import ANSWERED, LOST, QUEUED, STORE_FILE, ResultStore, utc_now
+from .store import ANSWERED, LOST, QUEUED, STORE_FILE, ResultStore, check_store, driver_lock, utc_now
+from .summary import INDEX_FILE, PLOT_FILE, write_index
 
 EVENT_TOPIC = "rscalib-batch"
+# The job process (rscalib.cli.job, started by its module name: batch never imports cli) dies with the
+# worker thread whose process id this names.
+JOB_MODULE = "rscalib.cli.job"
+PARENT_PID_ENV = "RSCALIB_BATCH_PARENT_PID"
 JOBS_DIR, LOGS_DIR = "jobs", "logs"
 # A job's own threads: the jobs are the parallelism (workers x threads-per-worker at once), so each
 # job's BLAS/OpenMP/OpenCV pools get one thread (OpenCV's matters for more than speed: with several
@@ -156,7 +162,9 @@ def run_job(task: dict) -> dict:
         return {**base, "unchanged": True}
     worker, where, memory_limit_bytes = _worker_context()
     out_dir, log_path = Path(task["out_dir"]), Path(task["log_path"])
-    shutil.rmtree(out_dir, ignore_errors=True)  # a killed run's half-written folder is not this run's
+    # The previous run's set (what rscalib wrote there, as its manifest lists, or a commit a killed
+    # run left half done) is not this run's answer; the user's own files in the folder stay.
+    remove_output_set(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     log_path.parent.mkdir(parents=True, exist_ok=True)
     argv = [*task["argv"], "--out", str(out_dir)]
@@ -165,7 +173,7 @@ def run_job(task: dict) -> dict:
     with open(log_path, "w") as log:
         log.write(f"$ rscalib {shlex.join(argv)}\n")
         log.flush()
-        process = subprocess.Popen([sys.executable, "-m", "rscalib.batch.child", *argv], stdout=log,
+        process = subprocess.Popen([sys.executable, "-m", JOB_MODULE, *argv], stdout=log,
                                    stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env)
     if worker is not None:
         worker.log_event(EVENT_TOPIC, {"id": task["id"], "pid": process.pid, "worker": where,
@@ -212,18 +220,69 @@ def _client(distributed, scheduler: Optional[str], workers: int, threads_per_wor
     import logging
 
     if scheduler:
+        check_scheduler_address(scheduler)
         try:
             return distributed.Client(scheduler, timeout="20s"), None
-        except (OSError, TimeoutError) as error:
-            raise InputError(f"--scheduler {scheduler}: cannot connect ({error})") from None
+        except (OSError, TimeoutError, ValueError, TypeError) as error:
+            raise InputError(f"--scheduler {scheduler}: cannot connect ({one_line(str(error))})") from None
     # A crashed worker's task goes to another worker once; then it is recorded as lost, not retried forever.
+    # Dask's own memory management of the workers is off: it would pause, then restart, a worker
+    # whose jobs use memory (the jobs are its child processes), and every job on it would be "lost";
+    # run_job enforces each job's share of --memory-limit itself and records the job as killed, with why.
     import dask
 
-    dask.config.set({"distributed.scheduler.allowed-failures": 1})
+    dask.config.set({"distributed.scheduler.allowed-failures": 1, "distributed.worker.memory.target": False,
+                     "distributed.worker.memory.spill": False, "distributed.worker.memory.pause": False,
+                     "distributed.worker.memory.terminate": False})
     cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker, processes=True,
                                        memory_limit=memory_limit, dashboard_address=None,
                                        silence_logs=logging.ERROR)
     return distributed.Client(cluster), cluster
+
+
+def check_scheduler_address(address: str) -> None:
+    """InputError unless `address` is a Dask scheduler address (tcp://host:port, tls://..., ...);
+    checked before anything is written."""
+    from distributed.comm import parse_address
+    from distributed.comm.addressing import parse_host_port
+
+    try:
+        scheme, location = parse_address(str(address), strict=False)
+        if scheme not in ("tcp", "tls", "ws", "wss", "ucx", "inproc"):
+            raise ValueError(f"unknown address scheme {scheme!r}")
+        if scheme != "inproc":
+            host, port = parse_host_port(location)
+            if not host or not port:
+                raise ValueError("no host or port")
+    except (ValueError, TypeError) as error:
+        raise InputError(f"--scheduler {one_line(str(address))}: not a Dask scheduler address "
+                         f"({one_line(str(error))}); give one such as tcp://host:8786") from None
+
+
+def _written_by_the_batch(store: Optional[ResultStore]) -> set:
+    """The files in DIR the batch wrote before, as its store records them (a store of an older
+    rscalib recorded none: then what that batch writes is taken as its own)."""
+    if store is None:
+        return set()
+    meta = store.meta()
+    if "written_files" not in meta:
+        return {INDEX_FILE, PLOT_FILE} | {r["log_path"] for r in store.rows() if r.get("log_path")}
+    return set(meta["written_files"])
+
+
+def claim_files(out: Path, jobs: list, store: Optional[ResultStore]) -> list:
+    """The files in DIR the batch is about to write (the jobs' logs, index.html, the plot) and has
+    written before; InputError, before anything is written, when one of them is already there and
+    the batch did not write it: the user's files in the batch folder are never overwritten. (Job
+    folders may hold the user's files: only the previous run's outputs are replaced there.)"""
+    written = _written_by_the_batch(store)
+    wanted = [f"{LOGS_DIR}/{job.id}.log" for job in jobs] + [INDEX_FILE, PLOT_FILE]
+    for name in wanted:
+        if os.path.lexists(out / name) and name not in written:
+            what = f"the log of job {name[len(LOGS_DIR) + 1:-4]}" if name.startswith(LOGS_DIR) else name
+            raise InputError(f"{shown(out / name)}: a file the batch did not write is where it writes {what}; "
+                             "move it away (the batch never overwrites files of yours)")
+    return sorted(written | set(wanted))
 
 
 def plan(jobs: list, store: ResultStore, version: str) -> tuple:
@@ -244,20 +303,44 @@ def plan(jobs: list, store: ResultStore, version: str) -> tuple:
 
 def run_batch(manifest, out_dir, *, resume: bool = False, workers: int = 2, threads_per_worker: int = 1,
               memory_limit="auto", scheduler: Optional[str] = None, timeout_s: Optional[float] = None,
-              say: Callable[[str], None] = print) -> dict:
+              say: Callable[[str], None] = print, parse_args: Optional[Callable[[list], object]] = None) -> dict:
     """Run every job of `manifest` not already answered in `out_dir`; returns {status: count} over the
-    manifest's jobs. InputError for a bad manifest, an existing batch without `resume`, no Dask."""
-    jobs = load_manifest(manifest)
+    manifest's jobs, and writes DIR/index.html. One driver at a time (store.driver_lock). InputError,
+    before anything is written, for a bad manifest or --scheduler, an existing batch without
+    `resume`, a results store that is not rscalib's (left untouched), another driver running the
+    batch, a file of the user's where the batch writes, no Dask. parse_args: the commands' parser
+    (load_manifest checks every row with it; `rscalib batch` passes the CLI's)."""
+    jobs = load_manifest(manifest, parse_args=parse_args)
     distributed = require_dask()
+    if scheduler:
+        check_scheduler_address(scheduler)
     out = Path(out_dir)
     store_path = out / STORE_FILE
-    if store_path.exists() and not resume:
-        raise InputError(f"{out} already holds a batch: add --resume to continue it (jobs whose inputs and "
-                         "options are unchanged are not run again), or choose another --out")
+    check_store(store_path)   # another program's file, random bytes, a damaged store: refused untouched
     out.mkdir(parents=True, exist_ok=True)
-    store = ResultStore(store_path, create=True)
+    with driver_lock(out):
+        existed = check_store(store_path)
+        if existed and not resume:
+            raise InputError(f"{out} already holds a batch: add --resume to continue it (jobs whose inputs and "
+                             "options are unchanged are not run again), or choose another --out")
+        store = ResultStore(store_path) if existed else None
+        try:
+            to_run, kept = plan(jobs, store, __version__) if store else ([(j, j.spec_hash(__version__), None)
+                                                                          for j in jobs], [])
+            written = claim_files(out, [job for job, _, _ in to_run], store)
+            if store is None:
+                store = ResultStore(store_path, create=True)
+            store.set_meta(written_files=written)
+            return _run_planned(jobs, to_run, kept, store, out, manifest, distributed, workers, threads_per_worker,
+                                memory_limit, scheduler, timeout_s, say)
+        finally:
+            if store is not None:
+                store.close()
+
+
+def _run_planned(jobs, to_run, kept, store, out, manifest, distributed, workers, threads_per_worker, memory_limit,
+                 scheduler, timeout_s, say) -> dict:
     try:
-        to_run, kept = plan(jobs, store, __version__)
         store.set_meta(manifest=str(Path(manifest).resolve()), driver_pid=os.getpid(), driver_host=socket.gethostname(),
                        state="running", started_utc=utc_now(), jobs=[j.id for j in jobs], rscalib_version=__version__)
         say(f"batch: {len(jobs)} jobs, {len(kept)} already done, {len(to_run)} to run")
@@ -274,17 +357,17 @@ def run_batch(manifest, out_dir, *, resume: bool = False, workers: int = 2, thre
                                 "previous_content_key": previous and previous["content_key"], "timeout_s": timeout_s}))
         if tasks:
             _run_tasks(distributed, store, tasks, previous_rows, scheduler, workers, threads_per_worker, memory_limit, say)
+        write_index(out, store.rows())
         store.set_meta(state="finished", finished_utc=utc_now())
         counts = {}
         for job in jobs:
             status = store.row(job.id)["status"]
             counts[status] = counts.get(status, 0) + 1
         return counts
-    except KeyboardInterrupt:
-        store.set_meta(state="interrupted", finished_utc=utc_now())
+    except BaseException:   # an interrupt, or an error such as a scheduler that cannot be reached
+        with contextlib.suppress(Exception):
+            store.set_meta(state="interrupted", finished_utc=utc_now())
         raise
-    finally:
-        store.close()
 
 
 def _run_tasks(distributed, store, tasks, previous_rows, scheduler, workers, threads_per_worker, memory_limit, say):

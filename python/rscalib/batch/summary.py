@@ -7,7 +7,19 @@ import os
 import socket
 from pathlib import Path
 
-from .store import ANSWERED, BAD_INPUT, NOT_ANSWERED, NOT_TRUSTED, OK, QUEUED, RUNNING, UNDETERMINED, ResultStore
+from .store import (
+    ANSWERED,
+    BAD_INPUT,
+    INTERRUPTED,
+    NOT_ANSWERED,
+    NOT_TRUSTED,
+    OK,
+    QUEUED,
+    RUNNING,
+    UNDETERMINED,
+    ResultStore,
+    driver_running,
+)
 
 INDEX_FILE = "index.html"
 PLOT_FILE = "line_delay_by_mode.png"
@@ -151,11 +163,18 @@ def summary_line(counts: dict) -> str:
     done = sum(counts.get(s, 0) for s in ANSWERED)
     failed = sum(counts.get(s, 0) for s in NOT_ANSWERED)
     total = sum(counts.values())
+    interrupted = f", interrupted {counts[INTERRUPTED]}" if counts.get(INTERRUPTED) else ""
     return (f"{total} jobs: done {done}{part((OK, NOT_TRUSTED, UNDETERMINED, BAD_INPUT))}, "
-            f"running {counts.get(RUNNING, 0)}, queued {counts.get(QUEUED, 0)}, failed {failed}{part(NOT_ANSWERED)}")
+            f"running {counts.get(RUNNING, 0)}, queued {counts.get(QUEUED, 0)}{interrupted}, "
+            f"failed {failed}{part(NOT_ANSWERED)}")
 
 
-def _driver_alive(meta: dict) -> bool:
+def _driver_alive(out: Path, meta: dict) -> bool:
+    """Whether the batch's driver is running: it holds DIR's lock (store.driver_lock; the kernel
+    drops it when the driver dies, however); for a batch of an older rscalib, its pid."""
+    held = driver_running(out)
+    if held is not None:
+        return held
     if meta.get("driver_host") != socket.gethostname():
         return meta.get("state") == "running"  # another machine: trust what it wrote
     try:
@@ -166,27 +185,35 @@ def _driver_alive(meta: dict) -> bool:
 
 
 def status_lines(out_dir) -> list:
-    """`rscalib batch --status DIR`: progress, whether the batch is still running, what failed and why."""
+    """`rscalib batch --status DIR`: progress, whether the batch is still running, what failed and why.
+
+    Reads only (the store is opened read-only, no lock is taken that a driver would wait for), so
+    it works on a read-only copy and changes nothing, whatever the folder holds: a file that is not
+    an rscalib store is an InputError. A job queued or running when its driver is gone (killed,
+    however) is shown as interrupted: nothing is running it; --resume does."""
     out = Path(out_dir)
     from .store import STORE_FILE
 
-    store = ResultStore(out / STORE_FILE)
+    store = ResultStore(out / STORE_FILE, read_only=True)
     try:
         rows, meta = store.rows(), store.meta()
     finally:
         store.close()
+    state = meta.get("state", "unknown")
+    alive = _driver_alive(out, meta)
+    if state == "running" and not alive:
+        state = "stopped"
+    if not alive:
+        rows = [{**r, "status": INTERRUPTED} if r["status"] in (RUNNING, QUEUED) else r for r in rows]
     counts = status_counts(rows)
     lines = [f"{out}: {summary_line(counts)}"]
-    state = meta.get("state", "unknown")
-    if state == "running" and not _driver_alive(meta):
-        state = "stopped"
-    pending = counts.get(RUNNING, 0) + counts.get(QUEUED, 0)
     if state == "running":
         lines.append(f"the batch is running (pid {meta.get('driver_pid')} on {meta.get('driver_host')}, "
                      f"since {meta.get('started_utc')})")
     elif state in ("stopped", "interrupted"):
-        lines.append(f"the batch {'was interrupted' if state == 'interrupted' else 'stopped without finishing'}"
-                     f" ({pending} jobs left queued or running): --resume runs what is missing")
+        lines.append(f"the batch {'was interrupted' if state == 'interrupted' else 'stopped without finishing'} "
+                     f"(its driver is gone; {counts.get(INTERRUPTED, 0)} jobs interrupted): --resume runs what is "
+                     "missing")
     else:
         lines.append(f"the batch finished at {meta.get('finished_utc')}; {out / INDEX_FILE}")
     for r in rows:
@@ -194,4 +221,6 @@ def status_lines(out_dir) -> list:
             lines.append(f"  {r['id']}: {r['status']}: {r.get('reason') or ''}")
         elif r["status"] == RUNNING and state == "running":
             lines.append(f"  {r['id']}: running on {r.get('worker')} since {r.get('started_utc')}")
+        elif r["status"] == INTERRUPTED:
+            lines.append(f"  {r['id']}: interrupted (its driver is gone){' on ' + r['worker'] if r.get('worker') else ''}")
     return lines

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from ..errors import InputError
 from .common import EXIT_INTERNAL, EXIT_OK, number, whole, workers
@@ -79,18 +80,13 @@ def run(args: argparse.Namespace) -> int:
     from ..io.output_folder import check_output_folder, expected_output_bytes
 
     check_output_folder(args.out, expected_output_bytes(64))   # the store, index.html, the first jobs' outputs
-    from ..batch.store import ANSWERED, STORE_FILE, ResultStore
-    from ..batch.summary import summary_line, write_index
+    from ..batch.store import ANSWERED
+    from ..batch.summary import INDEX_FILE, summary_line
 
     counts = run_batch(args.manifest, args.out, resume=args.resume, workers=args.workers,
                        threads_per_worker=args.threads_per_worker, memory_limit=_memory_limit(args.memory_limit),
                        scheduler=args.scheduler, timeout_s=args.job_timeout,
-                       say=lambda line: print(line, file=sys.stderr))
-    store = ResultStore(f"{args.out}/{STORE_FILE}")
-    try:
-        index = write_index(args.out, store.rows())
-    finally:
-        store.close()
+                       say=lambda line: print(line, file=sys.stderr), parse_args=args.parse_args)
     print(summary_line(counts))
-    print(f"summary: {index}")
+    print(f"summary: {Path(args.out) / INDEX_FILE}")
     return EXIT_OK if all(status in ANSWERED for status in counts) else EXIT_INTERNAL

@@ -105,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
 
     options = flicker_options(args)
     _check(args)
-    check_output_folder(args.out, expected_output_bytes(8))
+    check_output_folder(args.out, expected_output_bytes(8), inputs=[args.source])
     run = estimate_line_delay_flicker(args.source, args.frequency, options, progress=not args.quiet)
     summary = run.write(args.out)
     print_run(run, summary)

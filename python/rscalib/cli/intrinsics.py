@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io.output_folder import check_output_folder, expected_output_bytes
 
     options = intrinsics_options(args)
-    check_output_folder(args.out, expected_output_bytes(32, list(args.inputs), per_input_byte=0.1))
+    check_output_folder(args.out, expected_output_bytes(32, list(args.inputs), per_input_byte=0.1), inputs=list(args.inputs))
     source = args.inputs[0] if len(args.inputs) == 1 else args.inputs
     run_ = calibrate_intrinsics(source, args.target, options, progress=not args.quiet)
     summary = run_.write(args.out, lens_profile=lens_profile_names(args))

@@ -203,7 +203,7 @@ def _check_out(args) -> None:
     and what grows with the video (trajectories, corners.vnl)."""
     from ..io.output_folder import check_output_folder, expected_output_bytes
 
-    check_output_folder(args.out, expected_output_bytes(32, [args.video], per_input_byte=0.1))
+    check_output_folder(args.out, expected_output_bytes(32, [args.video], per_input_byte=0.1), inputs=[args.video])
 
 
 def _check_files(args) -> None:

@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     options = selfcalib_options(args)
     if not Path(args.source).exists():
         raise InputError(f"not found: {args.source}")
-    check_output_folder(args.out, expected_output_bytes(16))
+    check_output_folder(args.out, expected_output_bytes(16), inputs=[args.source])
     run_ = self_calibrate(args.source, options, progress=not args.quiet)
     written = run_.write(args.out)
     result, verdict = run_.result, run_.verdict

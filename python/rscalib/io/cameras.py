@@ -8,13 +8,10 @@ is supported. write_camera writes one format; write_camera_set writes every form
 """
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
-
-import yaml
 
 from .._core import CameraModel
 from ..errors import InputError
@@ -22,9 +19,10 @@ from .camera_formats.colmap import is_colmap, read_colmap, write_colmap_cameras
 from .camera_formats.common import CameraFile, camera_from_opencv, opencv_matrices
 from .camera_formats.gyroflow import is_gyroflow, read_gyroflow, write_gyroflow_profile
 from .camera_formats.kalibr import is_kalibr, read_kalibr, refit_without_k3, write_kalibr_camchain
-from .camera_formats.mrcal import is_mrcal, read_mrcal, write_mrcal_cameramodel
+from .camera_formats.mrcal import is_mrcal, parse_mrcal, read_mrcal, write_mrcal_cameramodel
 from .camera_formats.opencv import read_opencv, write_opencv_yaml
 from .camera_formats.ros import is_ros, read_ros, write_ros_camera_info
+from .safe_parse import load_json, load_yaml, one_line, read_text, shown
 
 __all__ = ["CameraFile", "camera_from_opencv", "opencv_matrices", "load_camera", "write_camera",
            "write_camera_set", "write_opencv_yaml", "write_kalibr_camchain", "write_gyroflow_profile",
@@ -34,44 +32,66 @@ __all__ = ["CameraFile", "camera_from_opencv", "opencv_matrices", "load_camera",
 READABLE = "OpenCV FileStorage, Kalibr camchain, ROS camera_info, mrcal .cameramodel, COLMAP cameras.txt, Gyroflow profile"
 
 
-def _plain_yaml(path: Path, text: str):
-    """PyYAML of a file that may carry OpenCV's `%YAML:1.0` header (not a YAML directive)."""
-    body = re.sub(r"\A(\s*%YAML[: ]\S*\s*\n)(\s*---\s*\n)?", "", text)
-    try:
-        return yaml.safe_load(body)
-    except yaml.YAMLError as error:
-        first = str(error).splitlines()[0] if str(error) else type(error).__name__
-        raise InputError(f"{path}: not valid YAML ({first})") from None
+# Larger than any camera file of the formats above (an mrcal model with its optimization inputs is
+# a few MB): a bigger file is refused from its size, before it is read.
+CAMERA_FILE_MAX_BYTES = 16 * 2 ** 20
+# OpenCV's %YAML:1.0 header (not a YAML directive) before a plain YAML file (ROS files saved by OpenCV)
+_OPENCV_HEADER = re.compile(r"\A(\s*%YAML[: ]\S*\s*\n)(\s*---\s*\n)?")
+_COMMENT_LINES = re.compile(r"\A(\s*#[^\n]*\n)*\s*")
+
+
+def _structured(path: Path, text: str):
+    """The data of a JSON, YAML (block or flow) or Python-literal (mrcal) camera file, each parsed
+    within safe_parse's limits; InputError with the reason of the syntax the file most looks like."""
+    text = _OPENCV_HEADER.sub("", text)
+    if not text[_COMMENT_LINES.match(text).end():].startswith(("{", "[")):
+        return load_yaml(text, path)
+    mrcal = lambda: parse_mrcal(path, text)  # noqa: E731
+    json_ = lambda: load_json(text, path)  # noqa: E731
+    yaml_ = lambda: load_yaml(text, path)  # noqa: E731
+    # the first parser's complaint is the one shown: that of the syntax the file most looks like
+    mrcal_like = "'lensmodel'" in text or "'distortion_model'" in text
+    first_error = None
+    for parse in (mrcal, json_, yaml_) if mrcal_like else (json_, yaml_, mrcal):
+        try:
+            return parse()
+        except InputError as error:
+            first_error = first_error or error
+    raise first_error
 
 
 def load_camera(path) -> CameraFile:
     """Read a camera file of any format above; InputError (one line, naming the file and field)
-    for a file or model rscalib cannot use."""
-    path = Path(path)
+    for a file or model rscalib cannot use. The file is read within safe_parse's limits (size,
+    nesting, aliases, integer length) whatever it holds."""
+    try:
+        return _load_camera(Path(path))
+    except InputError as error:
+        raise InputError(one_line(str(error))) from None
+
+
+def _load_camera(path: Path) -> CameraFile:
     if not path.is_file():
-        raise InputError(f"camera file not found: {path}")
-    text = path.read_text(errors="replace")
-    if is_mrcal(path, text):
-        return read_mrcal(path, text)
+        raise InputError(f"camera file not found: {shown(path)}")
+    text = read_text(path, CAMERA_FILE_MAX_BYTES, "camera file", encoding="utf-8-sig")   # a BOM is not text
+    if path.suffix.lower() == ".cameramodel":
+        return read_mrcal(path, parse_mrcal(path, text))
     if is_colmap(path, text):
         return read_colmap(path, text)
     if path.suffix.lower() == ".txt":
-        raise InputError(f"{path}: not a COLMAP cameras.txt (lines CAMERA_ID MODEL WIDTH HEIGHT PARAMS[])")
-    if path.suffix.lower() == ".json" or text.lstrip().startswith("{"):
-        try:
-            data = json.loads(text)
-        except ValueError:
-            data = None
-        if is_gyroflow(data):
-            return read_gyroflow(path, data)
-    if "opencv-matrix" in text or text.lstrip().startswith(("<?xml", "<opencv_storage", "{")):
-        return read_opencv(path)
-    data = _plain_yaml(path, text)
+        raise InputError(f"{shown(path)}: not a COLMAP cameras.txt (lines CAMERA_ID MODEL WIDTH HEIGHT PARAMS[])")
+    if "opencv-matrix" in text or text.lstrip().startswith(("<?xml", "<opencv_storage")):
+        return read_opencv(path, text)
+    data = _structured(path, text)
+    if is_gyroflow(data):
+        return read_gyroflow(path, data)
     if is_kalibr(data):
         return read_kalibr(path, data)
     if is_ros(data):
         return read_ros(path, data)
-    raise InputError(f"{path}: not a camera file rscalib reads ({READABLE}; docs/formats.md)")
+    if is_mrcal(data):
+        return read_mrcal(path, data)
+    raise InputError(f"{shown(path)}: not a camera file rscalib reads ({READABLE}; docs/formats.md)")
 
 
 CAMERA_FORMATS = ("opencv", "kalibr", "gyroflow", "ros", "mrcal", "colmap")

@@ -38,10 +38,10 @@ from typing import Any, Optional
 
 import cv2
 import numpy as np
-import yaml
 
 from ..errors import InputError
 from .camera_formats.common import finite_number
+from .safe_parse import load_yaml, one_line, read_text, shown
 
 TARGET_TYPES = ("checkerboard", "circlegrid", "aprilgrid", "charuco")
 
@@ -50,6 +50,8 @@ TARGET_TYPES = ("checkerboard", "circlegrid", "aprilgrid", "charuco")
 MIN_LENGTH_M, MAX_LENGTH_M = 1e-5, 100.0
 MAX_GRID_SIDE = 1000
 MAX_TARGET_POINTS = 10_000
+# A target file is a few hundred bytes; a larger one is refused from its size before it is read.
+TARGET_FILE_MAX_BYTES = 64 << 10
 
 # Kalibr draws its tags with a 2-bit black border (OpenCV's default is 1 bit).
 APRILGRID_BORDER_BITS = 2
@@ -231,20 +233,18 @@ def load_target(path) -> Target:
     TargetFileWarning when it has keys that are not used (a typo would otherwise go unnoticed)."""
     path = Path(path)
     if not path.is_file():
-        raise InputError(f"target file not found: {path}")
-    try:
-        data = yaml.safe_load(path.read_text(errors="replace"))
-    except yaml.YAMLError as error:
-        first = str(error).splitlines()[0] if str(error) else type(error).__name__
-        raise InputError(f"{path}: not valid YAML ({first})") from None
+        raise InputError(f"target file not found: {shown(path)}")
+    # safe_parse: the size before reading, no aliases, a nesting and an integer-length limit
+    data = load_yaml(read_text(path, TARGET_FILE_MAX_BYTES, "target file", encoding="utf-8-sig"), path)
     try:
         target = target_from_dict(data)
     except InputError as error:
-        raise InputError(f"{path}: {error}") from None
+        raise InputError(one_line(f"{path}: {error}")) from None
     extra = unknown_keys(data, target.target_type)
     if extra:
-        warnings.warn(f"{path}: {', '.join(extra)} not used (a {target.target_type} reads "
-                      f"{', '.join(sorted(KNOWN_KEYS[target.target_type]))})", TargetFileWarning, stacklevel=2)
+        warnings.warn(one_line(f"{path}: {', '.join(extra)} not used (a {target.target_type} reads "
+                               f"{', '.join(sorted(KNOWN_KEYS[target.target_type]))})"), TargetFileWarning,
+                      stacklevel=2)
     return target
 
 

@@ -8,8 +8,7 @@ from typing import Optional
 import numpy as np
 
 from .._core import CameraModel
-from ..verdict import Z_99
-from .bundle import BundleResult
+from .adjustment import AdjustmentResult
 from .driver import SelfCalibHistory
 
 PARAM_NAMES = ("f", "cx", "cy", "k1", "k2")
@@ -25,15 +24,6 @@ class Restart:
 
     def summary_dict(self) -> dict:
         return {"f0": self.f0, "mean": self.mean.tolist(), "bounds_99": self.bounds_99.tolist()}
-
-
-def bundle_covariance(ba: BundleResult, cut: Optional[BundleResult]) -> np.ndarray:
-    """The reported covariance of the adjusted camera (5, 5): clustered by track and keyframe, plus the
-    squared shift to the adjustment over tracks cut into pieces (the drift's systematic error) on the
-    diagonal; without the cut adjustment, infinite."""
-    if cut is None:
-        return np.full((5, 5), np.inf)
-    return ba.covariance_clustered + np.diag((ba.camera - cut.camera) ** 2)
 
 
 @dataclass
@@ -56,41 +46,38 @@ class SelfCalibResult:
     reason: str = ""
     filter_bounds_99: Optional[np.ndarray] = None
     restarts: list = field(default_factory=list)
-    # The bundle adjustment over the filter's tracks (None: not run or failed, see bundle_error);
+    # The bundle adjustment over the tracks (None: not run or failed, see adjustment_error); its
+    # reported covariance (the camera's and the line delay's, two-way clustered) is the bound.
     # estimate_from says which estimate ``mean`` (and so camera() and camera.yaml) is.
     filter_mean: Optional[np.ndarray] = None
-    bundle: Optional[BundleResult] = None
-    bundle_cut: Optional[BundleResult] = None     # the drift check: tracks cut into pieces
-    bundle_error: str = ""
+    adjustment: Optional[AdjustmentResult] = None
+    adjustment_error: str = ""
+    line_delay_given: Optional[tuple] = None      # (mean s/row, sigma s/row or 0 when held) given by the user
+    tracks: dict = field(default_factory=dict)   # the tracker's counts (tracks.TrackSet.stats) and what was used
     estimate_from: str = "filter"
 
-    def line_delay_estimate(self) -> Optional[tuple[float, np.ndarray]]:
-        """The line delay (s/row) the bundle adjustment estimated (no line delay given) and its 99 %
-        bounds (2,), clustered plus the drift's shift like the camera's; None when not estimated."""
-        ba, cut = self.bundle, self.bundle_cut
-        if ba is None or ba.line_delay_s is None:
+    def adjustment_bounds_99(self) -> Optional[np.ndarray]:
+        """The adjustment's 99 % bounds (5, 2) of the camera, whether or not they are the reported
+        ones; None without an adjustment."""
+        if self.adjustment is None:
             return None
-        if cut is None or cut.line_delay_s is None:
-            return ba.line_delay_s, np.array([-np.inf, np.inf])
-        sigma_us2 = ba.covariance_globals[5, 5] + (1e6 * (ba.line_delay_s - cut.line_delay_s)) ** 2
-        half = Z_99 * np.sqrt(sigma_us2) * 1e-6
-        return ba.line_delay_s, np.array([ba.line_delay_s - half, ba.line_delay_s + half])
+        return np.asarray(self.adjustment.bounds_99_two_way[:5], float)
+
+    def line_delay_estimate(self) -> Optional[tuple[float, np.ndarray]]:
+        """The line delay (s/row) the adjustment estimated (none given, or given with a sigma) and
+        its 99 % bounds (2,); None when not estimated."""
+        adj = self.adjustment
+        if adj is None or not adj.estimates_line_delay:
+            return None
+        return float(adj.line_delay_s), np.asarray(adj.bounds_99_two_way[5], float)
 
     def _line_delay_summary(self) -> dict:
         estimate = self.line_delay_estimate()
         if estimate is None:
-            return {"bundle_line_delay_s": None, "bundle_line_delay_bounds_99_s": None}
+            return {"line_delay_estimated_s": None, "line_delay_bounds_99_s": None}
         bounds = estimate[1]
-        return {"bundle_line_delay_s": float(estimate[0]),
-                "bundle_line_delay_bounds_99_s": [float(b) for b in bounds] if np.all(np.isfinite(bounds)) else None}
-
-    def bundle_bounds_99(self) -> Optional[np.ndarray]:
-        """The bundle adjustment's 99 % bounds (5, 2) with the drift's systematic error
-        (bundle_covariance), whether or not they are the reported ones; None without an adjustment."""
-        if self.bundle is None:
-            return None
-        half = Z_99 * np.sqrt(np.diag(bundle_covariance(self.bundle, self.bundle_cut)))
-        return np.c_[self.bundle.camera - half, self.bundle.camera + half]
+        return {"line_delay_estimated_s": float(estimate[0]),
+                "line_delay_bounds_99_s": [float(b) for b in bounds] if np.all(np.isfinite(bounds)) else None}
 
     @property
     def frames_processed(self) -> int:
@@ -123,11 +110,30 @@ class SelfCalibResult:
                    restarts=[r.summary_dict() for r in self.restarts],
                    estimate_from=self.estimate_from,
                    filter=None if self.filter_mean is None else dict(zip(PARAM_NAMES, map(float, self.filter_mean))),
-                   bundle=None if self.bundle is None else self.bundle.summary_dict(),
-                   bundle_tracks_cut=None if self.bundle_cut is None else self.bundle_cut.summary_dict(),
-                   bundle_bounds_99=None if self.bundle is None else self.bundle_bounds_99().tolist(),
-                   bundle_error=self.bundle_error,
+                   adjustment=None if self.adjustment is None else adjustment_summary(self.adjustment),
+                   adjustment_bounds_99=None if self.adjustment is None else self.adjustment_bounds_99().tolist(),
+                   adjustment_error=self.adjustment_error,
+                   line_delay_given=None if self.line_delay_given is None else list(self.line_delay_given),
+                   tracks=self.tracks,
                    **self._line_delay_summary(),
                    max_map_size=int(self.history.map_size.max()) if len(self.history) else 0,
                    history=self.history.summary_dict())
         return out
+
+
+def adjustment_summary(adj: AdjustmentResult) -> dict:
+    """The result.json record of an adjustment: the estimate, the reported (two-way clustered)
+    covariance and bounds, the solver's facts."""
+    def fin(x):
+        return float(x) if np.isfinite(x) else None
+    return {"names": list(adj.names), "estimate": [fin(v) for v in adj.estimate],
+            "bounds_99": [[fin(lo), fin(hi)] for lo, hi in adj.bounds_99_two_way],
+            "covariance": [[fin(v) for v in row] for row in adj.covariance_two_way],
+            "bounds_99_model": [[fin(lo), fin(hi)] for lo, hi in adj.bounds_99_model],
+            "line_delay_estimated": bool(adj.estimates_line_delay),
+            "keyframes": int(len(adj.keyframe_poses)), "points": int(len(adj.point_anchor)),
+            "observations": int(np.count_nonzero(adj.used)), "inlier_fraction": fin(np.mean(adj.inlier[adj.used]))
+            if np.any(adj.used) else None,
+            "sigma_px": fin(adj.sigma_px), "rms_px": fin(adj.rms_px), "converged": bool(adj.converged),
+            "termination": adj.termination, "iterations": int(adj.iterations), "solve_time_s": fin(adj.solve_time_s),
+            "step_sigma": fin(adj.step_sigma), "dropped_points": int(adj.dropped_points)}

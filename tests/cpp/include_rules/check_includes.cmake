@@ -1,8 +1,8 @@
 # Checks the include direction rules of the C++ tree (docs/architecture.md):
 #   cmake -DCPP_DIR=<cpp dir> -P check_includes.cmake
 # - A file of area A (cpp/include/rscalib/A/*.hpp, cpp/src/A/*) includes rscalib/B/... only
-#   when B is A or an area below A: core <- geometry <- spline <- camera <- rs, sog
-#   (rs and sog are peers and never include each other).
+#   when B is A or an area below A: core <- geometry <- spline <- camera <- rs, sog, and
+#   core, geometry, camera <- bundle (rs, sog and bundle are peers and never include each other).
 # - Installed headers include only installed headers ("rscalib/..."), never private ones.
 # - cpp/src/A/x.cpp implements the header of the same name: cpp/include/rscalib/A/x.hpp,
 #   or the private cpp/src/A/x.hpp.
@@ -11,13 +11,14 @@ if(NOT CPP_DIR)
   message(FATAL_ERROR "usage: cmake -DCPP_DIR=<cpp dir> -P check_includes.cmake")
 endif()
 
-set(areas core geometry spline camera rs sog)
+set(areas core geometry spline camera rs sog bundle)
 set(below_core "")
 set(below_geometry core)
 set(below_spline core geometry)
 set(below_camera core geometry spline)
 set(below_rs core geometry spline camera)
 set(below_sog core geometry spline camera)
+set(below_bundle core geometry camera)
 
 set(violations 0)
 macro(violation text)

@@ -121,7 +121,7 @@ def job_processes(out: Path) -> list:
             text = cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace")
         except OSError:
             continue
-        if "rscalib.batch.child" in text and str(out) in text:
+        if "rscalib.cli.job" in text and str(out) in text:
             found.append(text)
     return found
 
@@ -167,6 +167,8 @@ def test_batch_on_two_workers_resumes_after_a_kill_and_matches_the_single_comman
     assert 4 <= len(answered_before) < len(rows)
     status = rscalib_cli(["batch", "--status", out], batch_env)
     assert status.returncode == 0 and "stopped without finishing" in status.stdout, status.stdout
+    left = len(rows) - len(answered_before) - 1   # queued or running when the driver died (the victim: killed)
+    assert f"running 0, queued 0, interrupted {left}," in status.stdout.splitlines()[0], status.stdout
 
     # 2. --resume runs what is missing (the killed job, the queued and running ones), nothing else.
     resumed = rscalib_cli(["batch", manifest, "--out", out, "--resume"], batch_env)

@@ -120,5 +120,7 @@ def test_index_and_status(tmp_path):
     assert "running 1" in lines[0] and "the batch is running" in lines[1]
     assert "  e: killed: why" in lines and "  d: bad_input: why" in lines
     store.set_meta(driver_pid=2 ** 22 + 1)  # a pid that is not running: the batch was killed
-    assert "stopped without finishing (1 jobs left queued or running)" in status_lines(tmp_path)[1]
+    lines = status_lines(tmp_path)
+    assert "stopped without finishing (its driver is gone; 1 jobs interrupted)" in lines[1]
+    assert "running 0, queued 0, interrupted 1" in lines[0] and "  f: interrupted (its driver is gone)" in lines
     store.close()

@@ -57,6 +57,19 @@ def _line_delay_problem():
     return camera, trajectory, frames, uv, points_w
 
 
+def _bundle_args():
+    """Positional arguments of solve_bundle: three keyframes looking at a 5 x 4 grid 3 m ahead."""
+    camera = _civera_camera()
+    grid = np.stack(np.meshgrid(np.linspace(-1, 1, 5), np.linspace(-0.6, 0.6, 4)), -1).reshape(-1, 2)
+    points = np.column_stack([grid, np.full(len(grid), 3.0)])
+    poses = np.array([[0.0, 0, 0, 0, 0, 0], [-0.5, 0, 0, 0, 0, 0], [-0.2, 0.1, 0.1, 0, 0, 0]])
+    uv = np.vstack([camera.project(points + pose[:3]) for pose in poses])
+    abr = np.column_stack([points[:, :2] / 3.0, np.full(len(points), 1 / 3.0)])
+    return (camera, poses, np.repeat(np.arange(3), len(points)), np.tile(np.arange(len(points)), 3), uv,
+            np.zeros_like(uv), np.zeros(len(points), np.int64), abr, None, 0.0, False, None, 119.5,
+            _core.BundleOptions())
+
+
 def _calls():
     """Per class: (factory of an initialised instance, {method name: call(obj)}). Properties need no entry."""
     camera, trajectory, frames, uv, points_w = _line_delay_problem()
@@ -110,6 +123,8 @@ def _calls():
         _core.RsSolverOptions: (_core.RsSolverOptions, {}),
         _core.RsSolveSummary: (lambda: summary, {}),
         _core.LinearInterpOptions: (_core.LinearInterpOptions, {}),
+        _core.BundleOptions: (_core.BundleOptions, {}),
+        _core.BundleResult: (lambda: _core.solve_bundle(*_bundle_args()), {}),
         _core.LinearInterpSummary: (lambda: _core.solve_line_delay_linear(
             *linear_args, _core.LinearInterpOptions())[0], {}),
     }
@@ -180,6 +195,7 @@ def _child_uninitialised():
         "solve_line_delay_linear": (np.repeat(np.arange(3, dtype=np.int32), 9), uv, points_w,
                                     np.array([0.2, 0.5, 0.8]), camera, np.tile([0, 0, 1.0, 0, 0, 0], (3, 1)), 0.0,
                                     _core.LinearInterpOptions()),
+        "solve_bundle": _bundle_args(),
         "SogBank": (_core.SogOptions(), np.array([[200.0, 160, 120, 0, 0]]), np.eye(5)[None], np.ones(1),
                     (320, 240), 0.0112),
     }

@@ -197,6 +197,10 @@ def test_a_really_full_disk(tmp_path):
 
 
 def test_a_kill_while_moving_the_files_in_leaves_no_result_json(tmp_path, monkeypatch):
+    """The renames done in this process (as when the commit's helper cannot start) stopped half-way
+    by an exception: no result.json until the next run finishes the set (test_output_kills.py has
+    the kills of the real two-process commit)."""
+    monkeypatch.setattr(output_folder, "_helper_argv", lambda out: ["/nonexistent/python"])
     out = tmp_path / "out"
     write_set(out, ["a.txt", "b.txt", "old_only.txt"], "first")
     real_replace, calls = os.replace, []

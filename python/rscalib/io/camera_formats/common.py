@@ -89,6 +89,30 @@ def numeric_array(value, field: str) -> np.ndarray:
     return array
 
 
+# How far a camera matrix's fixed entries (below the diagonal: 0, the corner: 1) may be from their
+# value: files written with %.17g or %g round-trip far closer; a camera matrix that is not one
+# (transposed, scaled, a homography) is off by its focal length or principal point.
+CAMERA_MATRIX_TOLERANCE = 1e-9
+
+
+def check_camera_matrix(k: np.ndarray, field: str) -> None:
+    """InputError naming `field` unless k (3x3) is a camera matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]]
+    with positive focal lengths: MATLAB's transposed K (cx, cy in the last row), a last row other
+    than 0 0 1 (a scaled or projective matrix) or an entry below the diagonal are refused, saying which."""
+    off = lambda *values: bool(np.any(np.abs(values) > CAMERA_MATRIX_TOLERANCE))  # noqa: E731
+    if not off(k[0, 2], k[1, 2]) and off(k[2, 0], k[2, 1]) and not off(k[2, 2] - 1):
+        raise InputError(f"{field}: the principal point is in the last row ({k[2, 0]:g}, {k[2, 1]:g}): this is a "
+                         "transposed camera matrix (MATLAB's K'); write K = [fx 0 cx; 0 fy cy; 0 0 1]")
+    if off(k[2, 0], k[2, 1], k[2, 2] - 1):
+        raise InputError(f"{field}: the last row must be 0 0 1, not {k[2, 0]:g} {k[2, 1]:g} {k[2, 2]:g} "
+                         "(not a camera matrix)")
+    if off(k[1, 0]):
+        raise InputError(f"{field}: the entry below the diagonal is {k[1, 0]:g}, not 0 (a camera matrix is upper "
+                         "triangular: [fx 0 cx; 0 fy cy; 0 0 1])")
+    if not (k[0, 0] > 0 and k[1, 1] > 0):
+        raise InputError(f"{field}: the focal lengths must be positive (fx {k[0, 0]:g}, fy {k[1, 1]:g})")
+
+
 def camera_from_opencv(camera_matrix, dist_coeffs, width, height, model: str = RADTAN, *,
                        fields: tuple = ("camera_matrix", "distortion_coefficients"),
                        size_fields: tuple = ("image_width", "image_height")) -> CameraModel:
@@ -102,6 +126,7 @@ def camera_from_opencv(camera_matrix, dist_coeffs, width, height, model: str = R
     k = k.reshape(3, 3)
     dist = numeric_array(dist_coeffs, fields[1]).reshape(-1)
     width, height = image_side_px(width, size_fields[0]), image_side_px(height, size_fields[1])
+    check_camera_matrix(k, fields[0])
     if abs(k[0, 1]) > 1e-12 * abs(k[0, 0]):
         raise InputError(f"{fields[0]}: camera matrices with skew are not supported")
     if not (0 < k[0, 0] <= MAX_FOCAL_PX and 0 < k[1, 1] <= MAX_FOCAL_PX):

@@ -103,7 +103,10 @@ def read_gyroflow(path: Path, data: dict) -> CameraFile:
         k = k.reshape(3, 3)
         width = image_side_px(size.get("w"), "calib_dimension.w")
         height = image_side_px(size.get("h"), "calib_dimension.h")
-        if not data.get("asymmetrical", False):
+        asymmetrical = data.get("asymmetrical", False)
+        if not isinstance(asymmetrical, bool) and asymmetrical is not None:
+            raise InputError(f"asymmetrical must be true or false, not {str(asymmetrical)[:40]!r}")
+        if not asymmetrical:
             k[0, 2], k[1, 2] = width / 2.0, height / 2.0   # what Gyroflow does with a symmetrical profile
         camera = camera_from_opencv(k, params["distortion_coeffs"], width, height, models[model_name],
                                     fields=("fisheye_params.camera_matrix", "fisheye_params.distortion_coeffs"),
@@ -112,6 +115,9 @@ def read_gyroflow(path: Path, data: dict) -> CameraFile:
         line_delay = None
         if readout_ms is not None and readout_ms != 0:
             direction = data.get("frame_readout_direction")
+            if direction is not None and (not isinstance(direction, str) or direction not in READOUT_DIRECTIONS):
+                raise InputError(f"frame_readout_direction must be one of {', '.join(READOUT_DIRECTIONS)}, not "
+                                 f"{str(direction)[:40]!r}")
             line_delay = line_delay_value(finite_number(readout_ms, "frame_readout_time (ms)") * 1e-3 / image_lines(camera, direction),
                                           "frame_readout_time / image lines")
     except InputError as error:

@@ -21,7 +21,7 @@ import yaml
 
 from ..._core import CameraModel
 from ...errors import InputError
-from .common import EQUIDISTANT, RADTAN, CameraFile, camera_from_opencv, line_delay_value, supported
+from .common import EQUIDISTANT, RADTAN, CameraFile, camera_from_opencv, finite_number, line_delay_value, supported
 
 KALIBR_MODELS = ("pinhole",)
 KALIBR_DISTORTIONS = ("radtan", "equidistant", "none")
@@ -44,12 +44,12 @@ def read_kalibr(path: Path, data: dict) -> CameraFile:
     if others:
         notes.append(f"{path}: the camchain has {len(others) + 1} cameras; cam0 is used")
     model = cam.get("camera_model", "pinhole")
-    if model not in KALIBR_MODELS:
+    if not isinstance(model, str) or model not in KALIBR_MODELS:
         what = f" ({KNOWN_UNSUPPORTED[model]})" if isinstance(model, str) and model in KNOWN_UNSUPPORTED else ""
         raise InputError(f"{path}: cam0 camera_model '{model}'{what} is not supported; supported: camera_model "
                          f"pinhole with distortion_model {supported(KALIBR_DISTORTIONS)}")
     distortion = cam.get("distortion_model", "radtan")
-    if distortion not in KALIBR_DISTORTIONS:
+    if not isinstance(distortion, str) or distortion not in KALIBR_DISTORTIONS:
         raise InputError(f"{path}: cam0 distortion_model '{distortion}' is not supported; supported: "
                          f"{supported(KALIBR_DISTORTIONS)}")
     intrinsics = _numbers(path, cam, "intrinsics", 4)
@@ -72,9 +72,12 @@ def _numbers(path: Path, cam: dict, key: str, count: Optional[int]) -> list:
     value = cam.get(key)
     if value is None:
         raise InputError(f"{path}: cam0 has no field '{key}'")
+    if not isinstance(value, (list, tuple)):
+        raise InputError(f"{path}: cam0 {key} must be a list of numbers, not {type(value).__name__} "
+                         f"{str(value)[:40]!r}")
     try:
-        numbers = [float(v) for v in value]
-    except (TypeError, ValueError, OverflowError):
+        numbers = [finite_number(v, f"cam0 {key}") for v in value]
+    except InputError:
         raise InputError(f"{path}: cam0 {key} must be a list of numbers, not {str(value)[:40]!r}") from None
     if count is not None and len(numbers) != count:
         raise InputError(f"{path}: cam0 {key} needs {count} values, has {len(numbers)}")

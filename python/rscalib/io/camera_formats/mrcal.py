@@ -14,7 +14,6 @@ in a row-major order, x fastest; a missing point is `- -` with level `-`; level 
 """
 from __future__ import annotations
 
-import ast
 import re
 from pathlib import Path
 from typing import Optional
@@ -24,6 +23,7 @@ import numpy as np
 from ..._core import CameraModel
 from ..._version import __version__
 from ...errors import InputError
+from ..safe_parse import load_python_literal, one_line, shown
 from .common import RADTAN, CameraFile, camera_from_opencv, numeric_array, supported
 
 # lensmodel -> number of distortion values after fx fy cx cy
@@ -31,29 +31,36 @@ MRCAL_READ_MODELS = {"LENSMODEL_PINHOLE": 0, "LENSMODEL_OPENCV4": 4, "LENSMODEL_
                      "LENSMODEL_OPENCV8": 8}
 
 
-def is_mrcal(path: Path, text: str) -> bool:
-    return path.suffix == ".cameramodel" or bool(re.match(r"\s*(#.*\n\s*)*\{", text) and "intrinsics" in text
-                                                 and ("lensmodel" in text or "distortion_model" in text))
+def is_mrcal(data) -> bool:
+    """A parsed file is an mrcal model when it has intrinsics and a lensmodel (or, in files of
+    mrcal 1.x, a distortion_model named DISTORTION_...)."""
+    if not isinstance(data, dict) or "intrinsics" not in data:
+        return False
+    model = data.get("lensmodel", data.get("distortion_model"))
+    return "lensmodel" in data or (isinstance(model, str) and model.startswith(("LENSMODEL_", "DISTORTION_")))
 
 
-def _strip_comments(text: str) -> str:
-    # mrcal writes comments on lines of their own; strings never hold '#'
-    return "\n".join(line.split("#", 1)[0] for line in text.splitlines())
-
-
-def read_mrcal(path: Path, text: str) -> CameraFile:
-    try:
-        data = ast.literal_eval(_strip_comments(text))
-    except (ValueError, SyntaxError, MemoryError, RecursionError):
-        raise InputError(f"{path}: not an mrcal .cameramodel (a Python dict literal)") from None
+def parse_mrcal(path: Path, text: str):
+    """The Python dict literal of a .cameramodel (mrcal reads it with ast.literal_eval; `#` starts
+    a comment, also inside the dict, but not inside a string)."""
+    data = load_python_literal(text, path, "an mrcal .cameramodel (a Python dict literal)")
     if not isinstance(data, dict):
-        raise InputError(f"{path}: not an mrcal .cameramodel (a Python dict literal)")
+        raise InputError(f"{shown(path)}: not an mrcal .cameramodel (a Python dict literal)")
+    return data
+
+
+def read_mrcal(path: Path, data: dict) -> CameraFile:
+    """The camera of a parsed .cameramodel (parse_mrcal)."""
     model = data.get("lensmodel", data.get("distortion_model", ""))
-    model = model.replace("DISTORTION", "LENSMODEL") if isinstance(model, str) else model
+    if not isinstance(model, str):
+        raise InputError(f"{shown(path)}: lensmodel must be a name such as LENSMODEL_OPENCV8, not "
+                         f"{type(model).__name__} {one_line(str(model))[:40]}")
+    model = model.replace("DISTORTION", "LENSMODEL")
     if model not in MRCAL_READ_MODELS:
-        raise InputError(f"{path}: lensmodel '{model}' is not supported; supported: {supported(MRCAL_READ_MODELS)}")
+        raise InputError(f"{shown(path)}: lensmodel '{one_line(model)[:60]}' is not supported; supported: "
+                         f"{supported(MRCAL_READ_MODELS)}")
     if "intrinsics" not in data or "imagersize" not in data:
-        raise InputError(f"{path}: fields intrinsics and imagersize [w, h] are needed")
+        raise InputError(f"{shown(path)}: fields intrinsics and imagersize [w, h] are needed")
     try:
         intrinsics = numeric_array(data["intrinsics"], "intrinsics").reshape(-1)
         size = numeric_array(data["imagersize"], "imagersize").reshape(-1)
@@ -72,11 +79,11 @@ def read_mrcal(path: Path, text: str) -> CameraFile:
         camera = camera_from_opencv(k, dist, size[0], size[1], RADTAN, fields=("intrinsics", "intrinsics"),
                                     size_fields=("imagersize (w)", "imagersize (h)"))
     except InputError as error:
-        raise InputError(f"{path}: {error}") from None
+        raise InputError(f"{shown(path)}: {error}") from None
     notes = []
     extrinsics = data.get("extrinsics")
-    if extrinsics is not None and np.any(numeric_array(extrinsics, f"{path}: extrinsics") != 0):
-        notes.append(f"{path}: the extrinsics (rt_cam_ref) are not used")
+    if extrinsics is not None and np.any(numeric_array(extrinsics, f"{shown(path)}: extrinsics") != 0):
+        notes.append(f"{shown(path)}: the extrinsics (rt_cam_ref) are not used")
     return CameraFile(camera, None, "mrcal", notes)
 
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..._core import CameraModel
 from ...errors import InputError
+from ..safe_parse import check_nesting
 from .common import EQUIDISTANT, RADTAN, CameraFile, camera_from_opencv, image_lines, line_delay_value, opencv_matrices
 
 FISHEYE_PREFIX = "fisheye_"
@@ -27,8 +28,13 @@ _EQUIDISTANT_NAMES = ("fisheye", "equidistant", EQUIDISTANT, "kannala-brandt", "
 
 
 def _node_string(storage, key: str) -> str:
+    """The name under `key` ("" if absent); InputError naming the key for a number, list or map."""
     node = storage.getNode(key)
-    return node.string() if not node.empty() and node.isString() else ""
+    if node.empty() or node.isNone():
+        return ""
+    if not node.isString():
+        raise InputError(f"field {key} must be a name (such as {RADTAN}), not a number, list or mapping")
+    return node.string()
 
 
 def _node_number(storage, key: str):
@@ -55,9 +61,22 @@ def _node_matrix(storage, key: str) -> Optional[np.ndarray]:
     return matrix
 
 
-def read_opencv(path: Path) -> CameraFile:
+def _storage_text(text: str) -> str:
+    """The text as cv2.FileStorage reads it from memory: it tells XML, JSON and YAML apart by the
+    first characters, so YAML without OpenCV's header gets one."""
+    start = text.lstrip()
+    return text if start.startswith(("%YAML", "<", "{")) else "%YAML:1.0\n---\n" + text
+
+
+def read_opencv(path: Path, text: str) -> CameraFile:
+    """An OpenCV FileStorage file whose text (read within safe_parse's size limit) is `text`,
+    parsed by cv2.FileStorage from memory (the file name plays no part: OpenCV cannot open some
+    names, e.g. with a newline) after a nesting check (OpenCV's parser overflows its stack on
+    deeply nested files)."""
+    start = text.lstrip()
+    check_nesting(text, path, "xml" if start.startswith("<") else "yaml")
     try:
-        storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        storage = cv2.FileStorage(_storage_text(text), cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
     except (cv2.error, SystemError):  # a syntax error: OpenCV's parser raises through its constructor
         raise InputError(f"{path}: not a camera file rscalib reads (OpenCV FileStorage with a syntax error, or "
                          "none of Kalibr camchain, ROS camera_info, mrcal .cameramodel, COLMAP cameras.txt)") from None
@@ -103,7 +122,8 @@ def write_opencv_yaml(camera: CameraModel, path, line_delay_s: Optional[float] =
     k, dist = opencv_matrices(camera)
     fisheye = camera.model == EQUIDISTANT
     prefix = FISHEYE_PREFIX if fisheye else ""
-    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    # written to memory, then to the file: cv2.FileStorage cannot open every name (a newline in it)
+    storage = cv2.FileStorage(".yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
     try:
         if fisheye:
             storage.writeComment("pinhole-equidistant: OpenCV's fisheye model (cv2.fisheye.projectPoints), "
@@ -122,5 +142,7 @@ def write_opencv_yaml(camera: CameraModel, path, line_delay_s: Optional[float] =
                 storage.write("readout_direction", readout_direction)
         for key, value in (extra or {}).items():
             storage.write(key, value)
+        text = storage.releaseAndGetString()
     finally:
         storage.release()
+    Path(path).write_text(text)

@@ -28,6 +28,8 @@ def _matrix(path: Path, data: dict, key: str, shape: tuple) -> np.ndarray:
     node = data.get(key)
     if not isinstance(node, dict) or "data" not in node:
         raise InputError(f"{path}: field {key} (rows, cols, data) is missing")
+    if not isinstance(node["data"], (list, tuple)):
+        raise InputError(f"{path}: {key}.data must be a list of numbers, not {type(node['data']).__name__}")
     try:
         values = np.asarray([float(v) for v in node["data"]], dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
