@@ -214,3 +214,47 @@ def test_the_1280x720_render_with_4ms_blur_and_its_exact_camera_is_trusted():
     assert run.result.normalised_cost < 1.0
     assert run.verdict.trusted and run.verdict.exit_code == 0, run.verdict.reasons
     assert abs(run.line_delay_s - truth) < 3 * run.line_delay_std_s
+
+
+def _rendered(name: str, target_scale: float = 1.0):
+    """Detections stored from a render of the verdict benchmark's tuning set
+    (`benchmarks/bench_linedelay_verdict.py --seed0 3300 --render`, the video's phone.mp4 through
+    calibrate_video's detection), with the camera it was rendered with and its truth."""
+    from rscalib._core import CameraModel
+
+    data = np.load(DATA / name)
+    observations = Observations(data["frame_times_s"], data["frame_index"].astype(np.int64),
+                                data["point_id"].astype(np.int64), data["uv"], data["target_points"] * target_scale,
+                                tuple(int(x) for x in data["image_size"]))
+    w, h = (int(x) for x in data["image_size"])
+    return observations, CameraModel("pinhole-radtan", data["camera_params"], w, h), float(data["line_delay_s"])
+
+
+def test_a_rendered_video_with_its_target_in_millimetres_names_the_square_size():
+    """A rendered hand-held 640x480 video (set 3300, b00: trusted and right with its target file) with the
+    target's squares x1000 (40 mm written as 40): the first cause is the target size, said first, with
+    the square size."""
+    observations, camera, truth = _rendered("render_640x480_handheld.npz")
+    right = calibrate_video(observations, camera=camera)
+    assert right.verdict.trusted and abs(right.line_delay_s - truth) < 3 * right.line_delay_std_s
+    observations, camera, _ = _rendered("render_640x480_handheld.npz", target_scale=1000.0)
+    run = calibrate_video(observations, camera=camera)
+    assert not run.verdict.trusted and run.diagnosis.first_cause == judge.TARGET_SIZE
+    assert "square size" in run.verdict.reasons[0] and "40000 mm" in run.verdict.reasons[0]
+
+
+def test_refine_intrinsics_does_not_flip_the_category_of_a_rendered_vibrating_video():
+    """A rendered 640x480 video whose second half vibrates at 12-25 Hz (set 3300, w00): halves 80+ sigma
+    apart, the widened sigma far above 5 % of a frame's readout (the old "not determined" line), the
+    data's sigma far below it. With --refine-intrinsics sigma changes by a few per cent; the category,
+    the exit code and the cause named (the motion, not the camera) stay."""
+    observations, camera, _ = _rendered("render_640x480_vibrating_half.npz")
+    plain = calibrate_video(observations, camera=camera)
+    refined = calibrate_video(observations, camera=camera, options=LineDelayOptions(refine_intrinsics=True))
+    readout_line = 0.05 / (30.0 * 480)   # 5 % of a frame's readout, s/row
+    assert plain.result.line_delay_std_s > readout_line   # widened: would have been "not determined"
+    for run in (plain, refined):
+        assert run.verdict.status == "not trusted" and run.verdict.exit_code == 4
+        assert run.diagnosis.first_cause == judge.MOTION
+    ratio = refined.result.line_delay_std_s / plain.result.line_delay_std_s
+    assert 0.9 < ratio < 1.1 and ratio != 1.0   # a few per cent of sigma
