@@ -373,6 +373,13 @@ def summarise(rows: list[dict]) -> dict:
         "first_cause_right": sum(r.get("first_cause") == EXPECTED_CAUSE[r["fault"]] for r in faulty_flagged),
         "first_cause_right_fraction": sum(r.get("first_cause") == EXPECTED_CAUSE[r["fault"]] for r in faulty_flagged)
         / max(1, len(faulty_flagged)),
+        # the same over every faulty run, trusted ones included (those name no cause: most are right, a
+        # harmless fault -- a board declared 0.75x its size gives the same d)
+        "faulty_runs": len(faulty),
+        "first_cause_right_of_all_faulty_fraction": sum(r.get("first_cause") == EXPECTED_CAUSE[r["fault"]]
+                                                        for r in faulty_flagged) / max(1, len(faulty)),
+        "faulty_wrong": sum(wrong(r) for r in faulty),
+        "faulty_wrong_flagged": sum(wrong(r) and r["status"] != "trusted" for r in faulty),
         "refine_advised": len(advised), "refine_helped": len(helped),
     }
 

@@ -3,8 +3,8 @@ runs of renders: J/2N below 1 is no reason to distrust, physical limits name the
 the halves' widening cannot flip "determined", halves that agree are no warning.
 
 Oracles: the rules as documented; the truth of the renders (rscalib.sim)."""
-import math
 from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -53,6 +53,17 @@ def test_a_misfit_in_one_half_blames_the_motion_there():
     d = judge.diagnose_evidence(evidence(normalised_cost=9.0, halves_cost=[0.6, 34.0], halves_agree=False,
                                          halves_z=50.0))
     assert d.first_cause == judge.MOTION and "second half" in d.verdict.reasons[0]
+
+
+def test_a_misfit_in_one_half_is_not_hidden_by_the_whole_videos_cost():
+    # the stabilised sweeps of seed 3500: J/2N 0.43 over the whole video, the halves 2.3 sigma apart
+    # (agreeing), one half's J/2N 1.88 against 0.39 -- and d 8 sigma off
+    d = judge.diagnose_evidence(evidence(normalised_cost=0.43, halves_cost=[0.39, 1.88], halves_z=2.3))
+    assert not d.verdict.trusted and d.first_cause == judge.MOTION
+    assert "1.88 in one half" in d.verdict.reasons[0] and "second half" in d.verdict.reasons[0]
+    # both halves alike, or the worse one within the band: trusted
+    assert judge.diagnose_evidence(evidence(normalised_cost=0.9, halves_cost=[1.6, 1.7])).verdict.trusted
+    assert judge.diagnose_evidence(evidence(normalised_cost=0.4, halves_cost=[0.2, 1.4])).verdict.trusted
 
 
 def structure(field=1.0, shear=1.0) -> dict:
