@@ -422,13 +422,11 @@ def main() -> int:
     if args.rejudge or args.rerun_camera_check:
         rows = json.loads(out_path.read_text())["runs"]
         if args.rerun_camera_check:
-            # runs stored before the camera check existed: solve again only those it would run on
-            from rscalib.linedelay.judge import FIELD_CHI
-
+            # runs stored without a camera check: solve again those it runs on (every determined one)
             by_name = {c["name"]: c for c in cases}
             for i, row in enumerate(rows):
-                field = ((row.get("evidence") or {}).get("residual_structure") or {}).get("image_field")
-                if field is not None and field >= FIELD_CHI and "camera_check" not in row["evidence"]:
+                evidence = row.get("evidence") or {}
+                if evidence.get("determined") and not evidence.get("camera_check"):
                     rows[i] = run_one(by_name[row["name"]] | {"fault": row["fault"]}, videos, args.videos / "cache")
                     print(json.dumps({k: rows[i].get(k) for k in ("name", "fault", "status", "z", "first_cause")}),
                           flush=True)
