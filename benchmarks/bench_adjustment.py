@@ -1,6 +1,6 @@
 """Speed and peak memory of the C++ (Ceres) self-calibration bundle adjustment (docs/sog.md §22) on a
 synthetic problem of the size the new front end will feed it, and of the SciPy adjustment
-(selfcalib/bundle.py) on the same problem for comparison.
+(tests/python/selfcalib/scipy_reference_bundle.py, the product's former engine) on the same problem for comparison.
 
 The problem: a 640x480 civera-radial camera walking hand-held in a textured room
 (rscalib.sim.trajectories.HandheldRoomMotion) for KEYFRAMES keyframes 0.1 s apart, seen through a
@@ -8,7 +8,7 @@ The problem: a 640x480 civera-radial camera walking hand-held in a textured room
 to TRACK_LENGTH consecutive keyframes (each a room point, re-identified at every keyframe that sees it),
 about 50k observations at the defaults. Start: the truth perturbed (camera 5 % and 5 px, poses 2 cm and
 0.6 degrees, points 5 %); the line delay estimated from 0, soft_l1 at 2 px; velocities from the tracks
-(bundle.track_velocity), the same for both engines. Each engine runs in its own process, so each peak RSS
+(scipy_reference_bundle.track_velocity), the same for both engines. Each engine runs in its own process, so each peak RSS
 (ru_maxrss) is its own (the problem's generation included: `baseline` is the peak before the solve).
 Wall times depend on the machine's load (recorded as `load_average`); `cpu_s` is the process's CPU time
 (both threads of the solve).
@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import pathlib
 import resource
 import subprocess
 import sys
@@ -31,9 +32,11 @@ from scipy.spatial.transform import Rotation
 
 from rscalib import _core
 from rscalib.selfcalib.adjustment import KeyframeTracks, adjust
-from rscalib.selfcalib.bundle import FeatureTracks, bundle_adjust, track_velocity
 from rscalib.sim.scene_features import CiveraCamera, room_points
 from rscalib.sim.trajectories import HandheldRoomMotion
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests" / "python" / "selfcalib"))
+from scipy_reference_bundle import FeatureTracks, bundle_adjust, track_velocity  # noqa: E402  (the test-only reference)
 
 CAMERA = CiveraCamera(f=525.06, cx=308.65, cy=236.54, k1=-7.613e-3, k2=9.388e-4, width=640, height=480,
                       pixel_size_mm=0.0070216)

@@ -1,6 +1,6 @@
 """How good are the bundle adjustment's tracks? (issue 30; docs/sog.md §22)
 
-rscalib.selfcalib.tracks.track_features over
+rscalib.track_features (the self-calibration front end's tracker) over
 
 - the realistic renders of docs/sog.md §16 (rscalib.sim.scene_realism: photographic tiles, rolling
   shutter, blur, auto-exposure, noise, frame jitter, H.264; walk-forward, look-around,
@@ -43,8 +43,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
 from _common import machine_info, write_results  # noqa: E402
 
-from rscalib.selfcalib.calibrate import read_gray_frames  # noqa: E402
-from rscalib.selfcalib.tracks import TrackOptions, TrackSet, track_features  # noqa: E402
+from rscalib import TrackOptions, TrackSet, read_gray_frames, track_features  # noqa: E402
 
 SHARED_DATA = Path(os.environ.get("RSCALIB_SHARED_DATA", REPO.parent / "shared" / "data"))
 DESK = SHARED_DATA / "real_selfcalib_s3phone" / "escritorio_traslacion.mp4"

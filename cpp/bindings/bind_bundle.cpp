@@ -1,4 +1,4 @@
-// Bindings: the self-calibration bundle adjustment (docs/sog.md §22). NumPy arrays in, a
+// Bindings: the self-calibration bundle adjustment (docs/sog.md §23). NumPy arrays in, a
 // BundleResult out; the solve runs without the GIL.
 #include <limits>
 #include <optional>
@@ -93,7 +93,7 @@ BundleResult Solve(const camera::CameraModel& camera, const DoubleArray& keyfram
 
 void BindBundle(py::module_& m) {
   py::class_<BundleOptions>(m, "BundleOptions",
-                            "Options of the self-calibration bundle adjustment (docs/sog.md §22).")
+                            "Options of the self-calibration bundle adjustment (docs/sog.md §23).")
       .def(py::init<>())
       .def_readwrite("robust_loss", &BundleOptions::robust_loss,
                      "none | huber | cauchy | soft_l1 (Ceres' losses of |r|^2 per observation)")
@@ -160,7 +160,7 @@ void BindBundle(py::module_& m) {
         py::arg("free_intrinsics") = py::none(), py::arg("line_delay_s") = 0.0,
         py::arg("estimate_line_delay") = false, py::arg("line_delay_prior") = py::none(),
         py::arg("reference_row") = 0.0, py::arg_v("options", BundleOptions(), "BundleOptions()"),
-        "The self-calibration bundle adjustment (docs/sog.md §22): keyframe_poses (K, 6) [p; phi] "
+        "The self-calibration bundle adjustment (docs/sog.md §23): keyframe_poses (K, 6) [p; phi] "
         "T_cw; per observation its keyframe, point, uv_px (N, 2) and image_velocity_px_s (N, 2); "
         "per point its anchor keyframe and (a, b, rho) (P, 3). free_intrinsics: per camera "
         "parameter (None: all). The line delay (s/row) is held at line_delay_s, estimated from "

@@ -38,6 +38,9 @@ _EXPORTS = {
     "self_calibrate": ".selfcalib.pipeline",
     "SelfCalibOptions": ".selfcalib.options",
     "SelfCalibRun": ".selfcalib.pipeline",
+    "track_features": ".selfcalib.tracks",      # its front end's feature tracks, for your own geometry
+    "TrackOptions": ".selfcalib.options",
+    "TrackSet": ".selfcalib.tracks",
     # line delay from a flickering light
     "estimate_line_delay_flicker": ".flicker.pipeline",
     "FlickerOptions": ".flicker.options",
@@ -56,6 +59,7 @@ _EXPORTS = {
     "Target": ".io.targets",
     "open_source": ".io.video",
     "FrameSource": ".io.video",
+    "read_gray_frames": ".io.video",
     "detect_video": ".detection.pipeline",
     "DetectOptions": ".detection.options",
     "DetectionResult": ".detection.result",
@@ -105,10 +109,11 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from .intrinsics.pipeline import IntrinsicsRun, calibrate_intrinsics
     from .io.cameras import CameraFile, load_camera, write_camera
     from .io.targets import Target, load_target
-    from .io.video import FrameSource, open_source
+    from .io.video import FrameSource, open_source, read_gray_frames
     from .linedelay.options import LineDelayOptions, LocalizeOptions
     from .linedelay.pipeline import LineDelayRun, LocalizeRun, calibrate_video, localize_video
     from .observations import Observations
-    from .selfcalib.options import SelfCalibOptions
+    from .selfcalib.options import SelfCalibOptions, TrackOptions
     from .selfcalib.pipeline import SelfCalibRun, self_calibrate
+    from .selfcalib.tracks import TrackSet, track_features
     from .verdict import Verdict

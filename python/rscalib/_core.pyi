@@ -956,7 +956,7 @@ class SogBank:
         ...
 class BundleOptions:
     """
-    Options of the self-calibration bundle adjustment (docs/sog.md §22).
+    Options of the self-calibration bundle adjustment (docs/sog.md §23).
     """
     compute_covariance: bool
     def __init__(self) -> None:
@@ -1190,7 +1190,7 @@ def rotation_vector_to_matrix(rotation_vector: typing.Annotated[numpy.typing.Arr
     ...
 def solve_bundle(camera: CameraModel, keyframe_poses: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], observation_keyframe: numpy.ndarray, observation_point: numpy.ndarray, uv_px: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], image_velocity_px_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], point_anchor: numpy.ndarray, points: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], free_intrinsics: collections.abc.Sequence[bool] | None = None, line_delay_s: typing.SupportsFloat | typing.SupportsIndex = 0.0, estimate_line_delay: bool = False, line_delay_prior: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex] | None = None, reference_row: typing.SupportsFloat | typing.SupportsIndex = 0.0, options: BundleOptions = ...) -> BundleResult:
     """
-    The self-calibration bundle adjustment (docs/sog.md §22): keyframe_poses (K, 6) [p; phi] T_cw; per observation its keyframe, point, uv_px (N, 2) and image_velocity_px_s (N, 2); per point its anchor keyframe and (a, b, rho) (P, 3). free_intrinsics: per camera parameter (None: all). The line delay (s/row) is held at line_delay_s, estimated from it (estimate_line_delay), or estimated with a Gaussian prior (mean_s, sigma_s). reference_row: v_ref of the rolling-shutter shift. Returns a BundleResult.
+    The self-calibration bundle adjustment (docs/sog.md §23): keyframe_poses (K, 6) [p; phi] T_cw; per observation its keyframe, point, uv_px (N, 2) and image_velocity_px_s (N, 2); per point its anchor keyframe and (a, b, rho) (P, 3). free_intrinsics: per camera parameter (None: all). The line delay (s/row) is held at line_delay_s, estimated from it (estimate_line_delay), or estimated with a Gaussian prior (mean_s, sigma_s). reference_row: v_ref of the rolling-shutter shift. Returns a BundleResult.
     """
 def solve_line_delay(frame_time_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], uv: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], point_w: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 3]"], camera: CameraModel, trajectory: BSpline, line_delay_s: typing.SupportsFloat | typing.SupportsIndex, options: RsSolverOptions) -> RsSolveSummary:
     """

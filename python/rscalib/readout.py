@@ -30,3 +30,12 @@ def readout_direction(text: str, allowed: tuple = READOUT_DIRECTIONS, auto: bool
         return word
     choices = ((AUTO,) if auto else ()) + tuple(allowed)
     raise InputError(f"unknown readout direction {text!r} ({', '.join(choices)})")
+
+
+def check_rows_read(rows, image_lines: int, option: str = "--rows") -> None:
+    """InputError when the rows read out per frame (``rows``, None: not given) are fewer than the
+    image's lines along the readout: a sensor reads at least the rows it delivers (the rows read
+    count the blanking too, so more is possible, fewer is not)."""
+    if rows is not None and int(rows) < int(image_lines):
+        raise InputError(f"{option} {rows}: fewer than the {image_lines} image rows along the readout; the rows read "
+                         f"out per frame are at least the image's (blanking adds to them)")

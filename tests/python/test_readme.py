@@ -35,15 +35,21 @@ def test_every_sh_and_python_snippet_runs_in_order(tmp_path):
     env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
                RSCALIB_CACHE_DIR=str(tmp_path / "cache"), MPLBACKEND="Agg")
     for i, block in enumerate(blocks):
+        run_env = env
         if block["lang"] == "sh":
             argv = ["bash", "-euo", "pipefail", "-c", block["body"]]
-        else:
-            argv = [sys.executable, "-c", block["body"]]
-        result = subprocess.run(argv, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
+        else:   # as a user runs it: a script file, with an empty detection cache (its workers start)
+            script = tmp_path / f"readme_snippet_{i + 1}.py"
+            script.write_text(block["body"])
+            argv = [sys.executable, str(script)]
+            run_env = dict(env, RSCALIB_CACHE_DIR=str(tmp_path / f"cache_snippet_{i + 1}"))
+        result = subprocess.run(argv, cwd=tmp_path, env=run_env, capture_output=True, text=True, timeout=900)
         assert result.returncode == 0, (f"README snippet {i + 1} ({block['lang']}) failed with exit "
                                         f"{result.returncode}:\n{block['body']}\nstdout:\n{result.stdout[-2000:]}"
                                         f"\nstderr:\n{result.stderr[-2000:]}")
         assert "Traceback" not in result.stderr
+        if block["lang"] == "python":   # the detection ran here, not from the shell snippets' cache
+            assert any((tmp_path / f"cache_snippet_{i + 1}").rglob("*")), "the snippet did not detect"
 
 
 @pytest.mark.parametrize("body", [b for b, _ in snippets("yaml")])

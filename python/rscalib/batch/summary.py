@@ -39,6 +39,22 @@ def format_value(row: dict) -> str:
     return f"{text}{value * scale:.6g}{sigma}{unit}"
 
 
+# the index's number columns, one unit each: (value_name, scale from the stored SI value, header)
+# (intrinsics' fx and selfcalib's f share the focal-length columns)
+_NUMBER_COLUMNS = ((("line_delay_s",), 1e6, "line delay (µs/row)"), (("line_delay_s",), 1e6, "σ line delay (µs/row)"),
+                   (("f_px", "fx_px"), 1.0, "f (px)"), (("f_px", "fx_px"), 1.0, "σ f (px)"))
+
+
+def _number_cells(row: dict) -> list:
+    """The headline number and its sigma in the columns of their quantity (blank in the others)."""
+    cells = []
+    for k, (names, scale, _) in enumerate(_NUMBER_COLUMNS):
+        value = row.get("value" if k % 2 == 0 else "value_std") if row.get("value_name") in names else None
+        cells.append(_cell("", "") if value is None else _cell(f"{value * scale:.6g}" if k % 2 == 0
+                                                                else f"{value * scale:.3g}", repr(value)))
+    return cells
+
+
 def _plotted(row: dict) -> bool:
     """Line delays that the job claims (undetermined runs claim no number)."""
     return row.get("value_name") == "line_delay_s" and row.get("value") is not None and row["status"] in (OK, NOT_TRUSTED)
@@ -111,20 +127,18 @@ def write_index(out_dir, rows: list) -> Path:
     for r in rows:
         job_dir = r.get("out_dir") or f"jobs/{r['id']}"
         report = _link(out, f"{job_dir}/report.html", "report") or _link(out, f"{job_dir}/result.json", "result.json")
-        number = r.get("value")
         table.append("<tr>" + "".join([
             _cell(html.escape(r["id"])), _cell(html.escape(r.get("mode") or "")), _cell(html.escape(r.get("command") or "")),
             _cell(html.escape(r["status"] or "")), _cell("" if r.get("exit_code") is None else r["exit_code"]),
-            _cell(html.escape(format_value(r)), "" if number is None else repr(number)),
-            _cell("" if r.get("value_std") is None else f"{r['value_std']:.3g}", r.get("value_std") or ""),
+            *_number_cells(r),
             _cell(html.escape(r.get("verdict") or "")), _cell(html.escape(r.get("reason") or "")),
             _cell("" if r.get("wall_time_s") is None else f"{r['wall_time_s']:.1f}", r.get("wall_time_s") or ""),
             _cell("" if r.get("cpu_time_s") is None else f"{r['cpu_time_s']:.1f}", r.get("cpu_time_s") or ""),
             _cell("" if r.get("peak_memory_mb") is None else f"{r['peak_memory_mb']:.0f}", r.get("peak_memory_mb") or ""),
             _cell(f"{report} {_link(out, r.get('log_path'), 'log')}"),
         ]) + "</tr>")
-    headers = ["job", "mode", "command", "status", "exit", "result", "σ", "verdict", "reason", "wall time (s)",
-               "CPU (s)", "peak memory (MB)", "files"]
+    headers = ["job", "mode", "command", "status", "exit", *(h for _, _, h in _NUMBER_COLUMNS), "verdict", "reason",
+               "wall time (s)", "CPU (s)", "peak memory (MB)", "files"]
     page = f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>rscalib batch: {html.escape(out.name)}</title>
 <style>body{{font-family:sans-serif;margin:1.5em}} table{{border-collapse:collapse;font-size:90%}}

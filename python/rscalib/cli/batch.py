@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import EXIT_INTERNAL, EXIT_OK, number, whole, workers
+from .common import EXIT_INTERNAL, EXIT_OK, add_force, number, whole, workers
 
 
 def add_parser(sub) -> None:
@@ -27,6 +27,7 @@ def add_parser(sub) -> None:
                               "manifest or options")
     p.add_argument("manifest", nargs="?", metavar="MANIFEST", help="the jobs: a .csv or .yaml manifest")
     p.add_argument("--out", metavar="DIR", help="batch folder (created)")
+    add_force(p)
     p.add_argument("--status", metavar="DIR", help="print the progress of the batch in DIR (done / running / failed) "
                                                    "and exit")
     p.add_argument("--resume", action="store_true",
@@ -79,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     from ..batch.runner import run_batch
     from ..io.output_folder import check_output_folder, expected_output_bytes
 
-    check_output_folder(args.out, expected_output_bytes(64))   # the store, index.html, the first jobs' outputs
+    check_output_folder(args.out, expected_output_bytes(64), command=args.command, force=args.force)   # the store, index.html, the first jobs' outputs
     from ..batch.store import ANSWERED
     from ..batch.summary import INDEX_FILE, summary_line
 

@@ -18,6 +18,13 @@ EXIT_INTERNAL = 1        # an unexpected error (one line; RSCALIB_DEBUG=1 shows 
 CAPTURE_GUIDE = "`rscalib guide capture` (how to film for each command)"
 
 
+def add_force(parser: argparse.ArgumentParser) -> None:
+    """--force: write into an --out folder that holds another command's results."""
+    parser.add_argument("--force", action="store_true",
+                        help="write into an --out folder that holds another command's results (refused without it: "
+                             "the two sets of files would mix)")
+
+
 # ---- argparse `type=` converters: a value out of range is one line naming the option (exit 2),
 # e.g. "rscalib linedelay: error: argument --pixel-sigma: must be in [0.0001, 100] px, not 1e-300".
 

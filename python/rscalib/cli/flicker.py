@@ -21,7 +21,7 @@ from ..errors import InputError
 from ..flicker.options import METHODS, REGIONS, FlickerOptions
 from ..readout import AUTO, ROW_DIRECTIONS, readout_direction
 from ..verdict import NOT_DETERMINED
-from .common import CAPTURE_GUIDE, FRAMES, ROWS, number
+from .common import CAPTURE_GUIDE, FRAMES, ROWS, add_force, number
 
 EXIT_CODES_HELP = ("exit codes: 0 the line delay is estimated and every check passed (trust it); 2 bad input (one "
                    "line on stderr); 3 the frames do not determine the line delay (results written, no number "
@@ -59,6 +59,7 @@ def add_parser(sub) -> None:
                    help="the light's intensity frequency in Hz: twice the mains frequency for mains lamps (100 or "
                         "120), an LED's PWM frequency")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    add_force(p)
     p.add_argument("--rows", type=ROWS, default=None, help="sensor rows read out, for the readout time "
                                                          "(default: image height)")
     p.add_argument("--roi", default=None, metavar="x,y,w,h",
@@ -105,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
 
     options = flicker_options(args)
     _check(args)
-    check_output_folder(args.out, expected_output_bytes(8), inputs=[args.source])
+    check_output_folder(args.out, expected_output_bytes(8), inputs=[args.source], command=args.command,
+                        force=args.force)
     run = estimate_line_delay_flicker(args.source, args.frequency, options, progress=not args.quiet)
     summary = run.write(args.out)
     print_run(run, summary)

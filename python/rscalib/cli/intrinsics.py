@@ -6,7 +6,7 @@ from pathlib import Path
 
 from ..detection.options import DetectOptions
 from ..intrinsics.options import MODELS, IntrinsicsOptions
-from .common import number, whole, workers
+from .common import add_force, number, whole, workers
 
 
 def add_parser(sub) -> None:
@@ -21,6 +21,7 @@ def add_parser(sub) -> None:
                    help="a video, an image folder, or image files (shell glob or quoted pattern)")
     p.add_argument("--target", required=True, metavar="TARGET.yaml", help="Kalibr-style target file")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    add_force(p)
     p.add_argument("--model", choices=MODELS, default=None, help=f"camera model ({IntrinsicsOptions.model})")
     p.add_argument("--max-views", type=whole(3, 10_000, " views"), default=None, metavar="N",
                    help=f"use at most N views, chosen sharp and well spread ({IntrinsicsOptions.max_views})")
@@ -63,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
     from ..io.output_folder import check_output_folder, expected_output_bytes
 
     options = intrinsics_options(args)
-    check_output_folder(args.out, expected_output_bytes(32, list(args.inputs), per_input_byte=0.1), inputs=list(args.inputs))
+    check_output_folder(args.out, expected_output_bytes(32, list(args.inputs), per_input_byte=0.1), inputs=list(args.inputs),
+                        command=args.command, force=args.force)
     source = args.inputs[0] if len(args.inputs) == 1 else args.inputs
     run_ = calibrate_intrinsics(source, args.target, options, progress=not args.quiet)
     summary = run_.write(args.out, lens_profile=lens_profile_names(args))

@@ -18,6 +18,7 @@ from .common import (
     LINE_DELAY,
     PIXEL_SIGMA,
     ROWS,
+    add_force,
     number,
     whole,
     workers,
@@ -48,6 +49,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                    help="camera file: OpenCV YAML, Kalibr camchain, ROS camera_info, mrcal .cameramodel, COLMAP "
                         "cameras.txt or Gyroflow profile (docs/formats.md)")
     p.add_argument("--out", required=True, help="output folder (created)")
+    add_force(p)
     p.add_argument("--pixel-sigma", type=PIXEL_SIGMA, default=None,
                    help="detection noise in px (default: estimated from the target grid)")
     p.add_argument("--robust", choices=ROBUST_LOSSES, default=None,
@@ -203,7 +205,8 @@ def _check_out(args) -> None:
     and what grows with the video (trajectories, corners.vnl)."""
     from ..io.output_folder import check_output_folder, expected_output_bytes
 
-    check_output_folder(args.out, expected_output_bytes(32, [args.video], per_input_byte=0.1), inputs=[args.video])
+    check_output_folder(args.out, expected_output_bytes(32, [args.video], per_input_byte=0.1), inputs=[args.video],
+                        command=args.command, force=args.force)
 
 
 def _check_files(args) -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..selfcalib.options import SUBPIXEL_MODES, FrontEndOptions, SelfCalibOptions
-from .common import CAPTURE_GUIDE, FOCAL_PX, FRAMES, line_delay, number
+from .common import CAPTURE_GUIDE, FOCAL_PX, FRAMES, add_force, line_delay, number
 
 
 def add_parser(sub) -> None:
@@ -22,6 +22,7 @@ def add_parser(sub) -> None:
                                    "file-name order with an optional timestamps.txt (one time in seconds per line).")
     p.add_argument("source", help="video file or image folder")
     p.add_argument("--out", required=True, help="output folder (created)")
+    add_force(p)
     p.add_argument("--pixel-size-mm", type=number(1e-4, 1.0, " mm"), default=None,
                    help="sensor pixel pitch in mm: the distortion's radii are in mm, so it sets the units of k1 "
                         "(mm^-2) and k2 (mm^-4) and nothing else (f and the principal point do not depend on it); "
@@ -32,6 +33,10 @@ def add_parser(sub) -> None:
                         "e.g. `rscalib linedelay`'s line_delay_s): every measurement is moved to one time per "
                         "frame (docs/sog.md §18); default: the bundle adjustment estimates it from the tracks "
                         "(docs/sog.md §21; a baseline treats the camera as a global shutter)")
+    p.add_argument("--line-delay-from", default=None, metavar="RESULT_JSON",
+                   help="the result.json of `rscalib linedelay` (or `rscalib flicker`) on the same camera and video "
+                        "mode: its line delay with its sigma becomes the adjustment's prior (a board filmed once "
+                        "makes every later self-calibration better)")
     p.add_argument("--f-range", type=FOCAL_PX, nargs=2, default=None, metavar=("LO", "HI"),
                    help="focal lengths in px the candidates start from (default: a wide range for the image size)")
     p.add_argument("--subpixel", choices=SUBPIXEL_MODES, default=None,
@@ -72,6 +77,7 @@ def selfcalib_options(args: argparse.Namespace) -> SelfCalibOptions:
     baseline = "single" if args.bank == "single" else ("filter" if args.no_bundle else None)
     typed = {k: v for k, v in dict(
         pixel_size_mm=args.pixel_size_mm, max_frames=args.max_frames, line_delay_s=args.line_delay,
+        line_delay_from=args.line_delay_from,
         f_range_px=None if args.f_range is None else tuple(args.f_range), determined_within=args.determined_within,
         baseline=baseline, f0_px=args.f0, f_sigma_px=args.f_sigma, restarts=False if args.no_restarts else None,
         sprt_alpha=args.alpha, sprt_beta=args.beta).items() if v is not None}
@@ -87,41 +93,58 @@ def run(args: argparse.Namespace) -> int:
     options = selfcalib_options(args)
     if not Path(args.source).exists():
         raise InputError(f"not found: {args.source}")
-    check_output_folder(args.out, expected_output_bytes(16), inputs=[args.source])
+    check_output_folder(args.out, expected_output_bytes(16), inputs=[args.source], command=args.command,
+                        force=args.force)
     run_ = self_calibrate(args.source, options, progress=not args.quiet)
     written = run_.write(args.out)
     result, verdict = run_.result, run_.verdict
-    fm = result.filter_mean
-    print(f"filter: f {fm[0]:.2f} px, cx {fm[1]:.2f}, cy {fm[2]:.2f}; {result.gaussians_left} of "
-          f"{result.gaussians_initial} Gaussians left after {result.frames_processed} frames "
-          f"({result.frames_per_s:.1f} frames/s)")
-    if result.bundle_error:
-        print(f"warning: bundle adjustment failed: {result.bundle_error}", file=sys.stderr)
+    b = result.bounds_99
+    if verdict.claims:
+        m = result.mean
+        print(f"determined: f {m[0]:.2f} px [{b[0, 0]:.2f}, {b[0, 1]:.2f}], cx {m[1]:.2f} [{b[1, 0]:.2f}, "
+              f"{b[1, 1]:.2f}], cy {m[2]:.2f} [{b[2, 0]:.2f}, {b[2, 1]:.2f}], k1 {m[3]:.5f} [{b[3, 0]:.5f}, "
+              f"{b[3, 1]:.5f}] mm^-2, k2 {m[4]:.6f} [{b[4, 0]:.6f}, {b[4, 1]:.6f}] mm^-4 (99 % bounds)")
+        print(f"  because: {result.reason}")
+    else:
+        print(f"NOT DETERMINED: {result.reason}")
+        print(f"  no number is claimed (no camera.yaml); what the data allow, 99 %: f [{b[0, 0]:.1f}, {b[0, 1]:.1f}] "
+              f"px, cx [{b[1, 0]:.1f}, {b[1, 1]:.1f}], cy [{b[2, 0]:.1f}, {b[2, 1]:.1f}]")
+    line_delay = result.line_delay_estimate()
+    if line_delay is not None and verdict.claims:
+        d, (lo, hi) = line_delay
+        said = "with --line-delay-from as its prior" if options.line_delay_from else "from the scene"
+        print(f"  line delay estimated with it ({said}): {1e6 * d:.2f} us/row [{1e6 * lo:.2f}, {1e6 * hi:.2f}] "
+              "(99 %; `rscalib linedelay` on a target video measures it better)")
+    fm, ba_bounds = result.filter_mean, result.adjustment_bounds_99()
+    filter_line = (f"  the filter alone (Civera et al. 2009): f {fm[0]:.1f} px, c ({fm[1]:.1f}, {fm[2]:.1f}); "
+                   f"{result.gaussians_left} of {result.gaussians_initial} candidate cameras left after "
+                   f"{result.frames_processed} frames")
+    if ba_bounds is not None and not ba_bounds[0, 0] <= fm[0] <= ba_bounds[0, 1]:
+        filter_line += " (outside the adjustment's bounds: not used; sog.md §15)"
+    print(filter_line)
+    check = result.self_check
+    if check:
+        z = dict(zip(check["names"], check["z"]))
+        worst = sorted(z, key=z.get, reverse=True)[:2]
+        said = ", ".join(f"{name} {z[name]:.1f} sigma" for name in worst)
+        if max(z.values()) <= 3:
+            print(f"  self-check: the two halves of the video agree (largest difference {said})"
+                  + (f"; sigmas widened x{check['widen'][0]:.2f}" if check["widen"][0] > 1 else ""))
+        else:
+            print(f"  self-check: the two halves of the video differ ({said}): every sigma widened "
+                  f"x{check['widen'][0]:.1f}")
+    if result.adjustment_error:
+        print(f"warning: bundle adjustment failed: {result.adjustment_error}", file=sys.stderr)
     given = "given" if args.pixel_size_mm is not None else \
         "the default, the camera of Civera et al. 2009: give --pixel-size-mm for yours"
     print(f"pixel size {options.pixel_size_mm} mm ({given}): it sets the units of k1 (mm^-2) and k2 (mm^-4) "
           "only; f and the principal point do not depend on it")
-    b = result.bounds_99
     if verdict.claims:
-        m = result.mean
-        print(f"{result.estimate_from} (in camera.yaml): f {m[0]:.2f} px [{b[0, 0]:.2f}, {b[0, 1]:.2f}], "
-              f"cx {m[1]:.2f} [{b[1, 0]:.2f}, {b[1, 1]:.2f}], cy {m[2]:.2f} [{b[2, 0]:.2f}, {b[2, 1]:.2f}], "
-              f"k1 {m[3]:.5f} mm^-2, k2 {m[4]:.5f} mm^-4 (reported 99 % bounds)")
-        line_delay = result.line_delay_estimate()
-        if line_delay is not None:
-            d, (lo, hi) = line_delay
-            print(f"line delay estimated with it (no --line-delay given): {1e6 * d:.2f} us/row "
-                  f"[{1e6 * lo:.2f}, {1e6 * hi:.2f}] (99 %; `rscalib linedelay` on a target video measures it better)")
         print(f"OpenCV camera: {Path(args.out) / written['files']['opencv_yaml']} (within "
               f"{written['opencv_camera']['max_difference_px']:.3f} px of the civera-radial model)")
-        print(f"determined: {result.reason}")
-    else:
-        print(f"NOT DETERMINED: {result.reason}; reported bounds f [{b[0, 0]:.1f}, {b[0, 1]:.1f}], "
-              f"cx [{b[1, 0]:.1f}, {b[1, 1]:.1f}], cy [{b[2, 0]:.1f}, {b[2, 1]:.1f}] (no camera.yaml: no number "
-              "is claimed)", file=sys.stderr)
     for w in result.warnings:
         print(f"warning: {w}", file=sys.stderr)
     if not verdict.trusted:
         print(f"how to record a self-calibration walk: {CAPTURE_GUIDE}")
-    print(f"results: {Path(args.out) / 'result.json'}")
+    print(f"report: {Path(args.out) / 'report.html'}")
     return verdict.exit_code

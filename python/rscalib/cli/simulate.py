@@ -7,7 +7,7 @@ import re
 import sys
 
 from ..errors import InputError
-from .common import EXIT_OK, image_size, number, seconds_in, seed, whole, workers
+from .common import EXIT_OK, add_force, image_size, number, seconds_in, seed, whole, workers
 
 # Renders of at most an hour (the dense trajectory and the truth grow with the duration).
 MAX_DURATION_S = 3600.0
@@ -25,6 +25,7 @@ def add_parser(sub) -> None:
                     "exact rolling-shutter projections of the target points), camera.yaml (OpenCV) and "
                     "target.yaml (Kalibr).")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    add_force(p)
     p.add_argument("--line-delay", type=seconds_in(-0.01, 0.01), default=30e-6, metavar="D",
                    help="line delay d per row, seconds or with a unit (30us)")
     p.add_argument("--fps", type=number(1.0, 1000.0, " fps"), default=30.0, help="frame rate (30); frame i is stamped i/fps")
@@ -95,7 +96,8 @@ def _check_out(args: argparse.Namespace, size, frames: float, copies: int = 1) -
     """--out before rendering: writable, with room for the frames (raw size: generous for FFV1/PNG)."""
     from ..io.output_folder import check_output_folder, expected_output_bytes
 
-    check_output_folder(args.out, expected_output_bytes(16, extra_bytes=float(frames) * size[0] * size[1] * copies))
+    check_output_folder(args.out, expected_output_bytes(16, extra_bytes=float(frames) * size[0] * size[1] * copies),
+                        command=args.command, force=args.force)
 
 
 def run_led(args: argparse.Namespace) -> int:

@@ -26,7 +26,7 @@ from typing import Optional
 import numpy as np
 
 from ..errors import InputError
-from ..readout import BOTTOM_TO_TOP, TOP_TO_BOTTOM
+from ..readout import BOTTOM_TO_TOP, TOP_TO_BOTTOM, check_rows_read
 from .model import (
     SPECTRUM_MIN_CYCLES,
     LogProfiles,
@@ -310,6 +310,7 @@ def estimate_from_profiles(profiles: RowProfiles, frequency_hz: float, options: 
     """The line delay d (s/row) from row profiles whose region is chosen (profiles.region), for a
     light of intensity frequency ``frequency_hz``; see the module docstring."""
     f = float(frequency_hz)
+    check_rows_read(options.rows, profiles.image_size[1])
     rows = options.rows if options.rows is not None else profiles.image_size[1]
     if options.method == "phase-drift" and profiles.times_s is None:
         raise InputError("the phase-drift method needs frame timestamps")

@@ -2,7 +2,10 @@
 
 - check_output_folder: --out must be a folder rscalib can create or write in, on a real file
   system (not /proc, /sys, /dev), with room for the expected outputs, and not an input folder;
-  otherwise InputError (exit 2) before detection or solving starts.
+  otherwise InputError (exit 2) before detection or solving starts. Given the command, the folder
+  is also its own: one that holds another command's results is refused unless forced (their
+  files would mix, and a re-run would remove the other's), and the folder is marked as the
+  command's (`.rscalib-command.json`).
 - output_set: a writer writes into a hidden staging folder inside the output folder; on success the
   set is committed: the plan (which files move in, which of the previous run's files go) is written
   to `.rscalib-commit.json`, then carried out with result.json last, so a folder with a result.json
@@ -41,8 +44,11 @@ from . import _commit as commit_steps
 from ._commit import JOURNAL, LOCK, MANIFEST, STAGING_PREFIX, plain_names, read_journal, remove, roll_forward
 from .results import RESULT_FILE  # the marker of a complete set
 
-__all__ = ["JOURNAL", "LOCK", "MANIFEST", "STAGING_PREFIX", "check_output_folder", "expected_output_bytes",
-           "input_bytes", "output_set", "recover_output_folder", "remove_output_set"]
+__all__ = ["JOURNAL", "LOCK", "MANIFEST", "OWNER", "STAGING_PREFIX", "check_output_folder", "expected_output_bytes",
+           "folder_owner", "input_bytes", "output_set", "recover_output_folder", "remove_output_set"]
+
+# which command writes into the folder (`{"command": "linedelay"}`), marked when a command claims it
+OWNER = ".rscalib-command.json"
 
 MB = 1 << 20
 
@@ -77,11 +83,39 @@ def _existing_ancestor(path: Path) -> Path:
     return Path("/")
 
 
-def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out", inputs=()) -> Path:
+def folder_owner(out) -> Optional[str]:
+    """The command whose results `out` holds: its mark (OWNER), else what its files say (a
+    result.json's provenance, a batch store, a simulation's truth.json); None for a folder without
+    rscalib results."""
+    out = Path(out)
+    for name, read in ((OWNER, lambda d: d.get("command")),
+                       (RESULT_FILE, lambda d: (d.get("provenance") or {}).get("command"))):
+        try:
+            data = json.loads((out / name).read_text()) if (out / name).is_file() else None
+        except (OSError, ValueError):
+            data = None
+        if isinstance(data, dict):
+            try:
+                command = read(data)
+            except AttributeError:
+                command = None
+            if isinstance(command, str) and command:
+                return command
+    if (out / "results.sqlite").is_file():
+        return "batch"
+    if (out / "truth.json").is_file():
+        return "simulate"
+    return None
+
+
+def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out", inputs=(),
+                        command: Optional[str] = None, force: bool = False) -> Path:
     """InputError (one line naming the path and the reason) unless `out` is, or can be created as,
     a writable folder with `needed_bytes` free, and is none of the `inputs` (an image folder given
-    as --out would get the outputs among its frames). Creates nothing (it finishes a commit a
-    killed run left half done: recover_output_folder); returns the path."""
+    as --out would get the outputs among its frames). With `command`: InputError when the folder
+    holds another command's results (unless `force`), else the folder is created and marked as the
+    command's. It finishes a commit a killed run left half done (recover_output_folder); returns
+    the path."""
     if str(out).strip() == "":
         raise InputError(f"{option} is empty: give an output folder")
     out = Path(out)
@@ -117,7 +151,24 @@ def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out",
                          f"{needed_bytes / MB:.0f} MB")
     if (resolved / JOURNAL).exists():
         recover_output_folder(resolved)
+    if command is not None:
+        _claim(out, resolved, command, force, option)
     return out
+
+
+def _claim(out: Path, resolved: Path, command: str, force: bool, option: str) -> None:
+    owner = folder_owner(resolved) if resolved.is_dir() else None
+    if owner is not None and owner != command and not force:
+        raise InputError(f"{option} {out}: holds the results of `rscalib {owner}`; give `rscalib {command}` a folder "
+                         f"of its own, or --force to write into it anyway (the files of `rscalib {owner}` that "
+                         f"`rscalib {command}` also writes are replaced)")
+    if owner == command and (resolved / OWNER).is_file():
+        return
+    try:
+        resolved.mkdir(parents=True, exist_ok=True)
+        (resolved / OWNER).write_text(json.dumps({"command": command}) + "\n")
+    except OSError as error:
+        raise InputError(f"{option} {out}: cannot write in it ({error.strerror})") from None
 
 
 def input_bytes(paths) -> int:

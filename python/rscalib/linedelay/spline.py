@@ -17,6 +17,7 @@ import numpy as np
 from .._core import BSpline, CameraModel, RsSolverOptions, fit_bspline, solve_line_delay, unwrap_rotation_vectors
 from ..errors import InputError
 from ..observations import Observations
+from ..readout import check_rows_read
 from . import noise
 from .common import (
     SOLVER_THREADS,
@@ -266,6 +267,7 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
          progress=None) -> LineDelayResult:
     rows, pixel_sigma, robust_loss, max_rounds = options.rows, options.pixel_sigma_px, options.robust_loss, \
         options.max_rounds
+    check_rows_read(rows, observations.image_size[1])
     min_segment_s, num_segments = options.min_segment_s, options.uniform_knots
     adaptive_knots = num_segments is None
     standardise_errors, use_motion_prior = options.standardise_errors, options.motion_prior

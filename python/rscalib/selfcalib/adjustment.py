@@ -1,4 +1,4 @@
-"""The self-calibration bundle adjustment in C++ (Ceres; docs/sog.md §22): a thin wrapper.
+"""The self-calibration bundle adjustment in C++ (Ceres; docs/sog.md §23): a thin wrapper.
 
 :func:`adjust` takes feature tracks at keyframes (:class:`KeyframeTracks`: keyframe start poses,
 observations, the tracks' image velocities, start points) and a start camera, and returns an
@@ -134,13 +134,14 @@ def _world_points(poses: np.ndarray, anchor: np.ndarray, abr: np.ndarray) -> np.
 
 def adjust(tracks: KeyframeTracks, camera: _core.CameraModel, *,
            free_params: Optional[Union[Sequence[bool], Sequence[str]]] = None,
-           line_delay_s: float = 0.0, estimate_line_delay: bool = False,
+           line_delay_s: Optional[float] = None, estimate_line_delay: bool = False,
            line_delay_prior: Optional[tuple[float, float]] = None, reference_row: Optional[float] = None,
            loss: str = "soft_l1", loss_scale_px: float = 2.0, max_iterations: int = 200,
            num_threads: int = 2, options: Optional[_core.BundleOptions] = None) -> AdjustmentResult:
     """Adjust ``camera`` (its model's parameters; ``free_params``: a mask or names, None: all),
-    the line delay (held at ``line_delay_s``, estimated from it with ``estimate_line_delay``, or
-    with a Gaussian prior ``(mean_s, sigma_s)``), the keyframe poses and the points to the tracks.
+    the line delay (held at ``line_delay_s`` (None: 0, a global shutter), estimated from it with
+    ``estimate_line_delay``, or with a Gaussian prior ``(mean_s, sigma_s)``), the keyframe poses and
+    the points to the tracks.
     ``reference_row``: the row the shutter's shift is counted from (None: the middle row,
     (height - 1) / 2). ``options`` (a ``_core.BundleOptions``) overrides loss, loss_scale_px,
     max_iterations and num_threads. Raises InputError with the reason on bad input."""
@@ -174,7 +175,7 @@ def adjust(tracks: KeyframeTracks, camera: _core.CameraModel, *,
     row = (camera.height - 1) / 2.0 if reference_row is None else float(reference_row)
     result = _core.solve_bundle(camera, poses, keyframe, point, uv, velocity, anchor, abr,
                                 free_intrinsics=None if free_params is None else [bool(f) for f in free_params],
-                                line_delay_s=float(line_delay_s), estimate_line_delay=bool(estimate_line_delay),
+                                line_delay_s=0.0 if line_delay_s is None else float(line_delay_s), estimate_line_delay=bool(estimate_line_delay),
                                 line_delay_prior=None if line_delay_prior is None else tuple(map(float, line_delay_prior)),
                                 reference_row=row, options=options)
     estimate = np.r_[result.camera_params, result.line_delay_s]

@@ -1,6 +1,6 @@
-"""Whether the data determine the calibration, and the bounds to report (docs/sog.md §15, §20, §21):
-by the bundle adjustment (the method: judge_bundle) or by restarting two single filters (the
-filter baselines: judge_determined); and the verdict (rscalib.verdict.Verdict) of a result."""
+"""Whether the data determine the calibration, and the bounds to report (docs/sog.md §15, §24): by
+the bundle adjustment (the method: judge_adjustment) or by restarting two single filters (the filter
+baselines: judge_determined); and the verdict (rscalib.verdict.Verdict) of a result."""
 from __future__ import annotations
 
 from typing import Optional
@@ -8,8 +8,8 @@ from typing import Optional
 import numpy as np
 
 from ..verdict import NOT_DETERMINED, TRUSTED, Z_99, Verdict
-from .bundle import BundleResult
-from .result import SelfCalibResult, bundle_covariance
+from .adjustment import AdjustmentResult
+from .result import SelfCalibResult
 
 # "Determined" (docs/sog.md §14): after the bank, two single EKFs are restarted over the same frames
 # from f = (1 -+ RESTART_OFFSET) times the bank's estimate (sigma RESTART_OFFSET / 2 of it, so the
@@ -27,9 +27,9 @@ RESTART_OFFSET = 0.2
 DETERMINED_MAX_CONTRACTION = 0.35
 DETERMINED_PP_TOLERANCE = 0.02
 UNDETERMINED_PP_HALF_WIDTH = 0.05
-# "Determined" with the bundle adjustment (the default since issue 11; docs/sog.md §20): the
-# adjustment over the filter's tracks (bundle.py) removes the filter's bias, and its covariance
-# clustered by feature track (errors correlated along a track count once) is the bound. Determined:
+# "Determined" with the bundle adjustment (docs/sog.md §24): the adjustment over the tracks removes the
+# filter's bias, and its covariance clustered by feature track and keyframe (errors correlated along a
+# track, or within a frame, count once) is the bound. Determined:
 # the adjustment converged over >= MIN_BUNDLE_POINTS tracks (fewer clusters make a clustered
 # covariance itself uncertain; the real desk video has 32-60) and its 99 % interval of f is within
 # +-SelfCalibOptions.determined_within of f: a user's requirement ("f known to 2 %"), not a fitted number.
@@ -38,9 +38,6 @@ MIN_BUNDLE_POINTS = 30
 # third to all of it): a line delay whose 99 % interval lies wholly beyond this many frame intervals per
 # image is the model misfitting the data, not a shutter (docs/sog.md §21).
 MAX_READOUT_FRAMES = 1.25
-# Converged: the solver stopped on its own criterion, or the camera's remaining Gauss-Newton step is
-# under BUNDLE_STEP_SIGMA of its (model) sigma: it moves no more than a tenth of its uncertainty.
-BUNDLE_STEP_SIGMA = 0.1
 def prior_bounds(initial, image_size: tuple[int, int]) -> np.ndarray:
     """What is known without the data (5, 2): the 99 % range of the initial mixture per parameter,
     the principal point's widened to UNDETERMINED_PP_HALF_WIDTH of the image diagonal."""
@@ -84,60 +81,59 @@ def judge_determined(mean: np.ndarray, bounds_99: np.ndarray, gaussians_left: in
     return True, (f"one Gaussian left; single EKFs restarted {ends} ({contraction:.2f} of their starting "
                   "difference remains)"), bounds
 
-def _impossible_readout(ba: BundleResult, image_height: Optional[int]) -> bool:
-    interval = ba.extra.get("frame_interval_s")
-    if ba.line_delay_s is None or image_height is None or not interval:
+def _impossible_readout(adj: AdjustmentResult, image_height: int, frame_interval_s: Optional[float]) -> bool:
+    """The line delay's whole 99 % interval reads the rows in more than MAX_READOUT_FRAMES frame
+    intervals (or the other way round): no rolling shutter does; the model does not fit."""
+    if not adj.estimates_line_delay or not frame_interval_s:
         return False
-    least = min(abs(b) for b in ba.line_delay_bounds_99_s) if np.prod(ba.line_delay_bounds_99_s) > 0 else 0.0
-    return least * image_height > MAX_READOUT_FRAMES * interval
+    lo, hi = adj.bounds_99_two_way[5]
+    least = min(abs(lo), abs(hi)) if lo * hi > 0 else 0.0
+    return least * image_height > MAX_READOUT_FRAMES * frame_interval_s
 
 
-def judge_bundle(ba: Optional[BundleResult], cut: Optional[BundleResult], error: str, prior_bounds: np.ndarray,
-                 max_f_half_width: float, image_height: Optional[int] = None
-                 ) -> tuple[bool, str, np.ndarray]:
-    """(determined, reason, bounds to report) from the bundle adjustment ``ba`` and the same over
-    tracks cut into pieces ``cut``: determined when it converged over >= MIN_BUNDLE_POINTS tracks and
-    the 99 % interval of f from bundle_covariance is within +-``max_f_half_width`` of f; the bounds
-    are then that interval for all five. Not determined: the prior's bounds, widened to include the
-    estimate. With the line delay estimated (and ``image_height`` given), a readout of the rows that
-    must take longer than MAX_READOUT_FRAMES frame intervals is no rolling shutter: the model does not
-    fit the data, not determined either."""
-    if ba is None:
+def judge_adjustment(adj: Optional[AdjustmentResult], error: str, prior_bounds: np.ndarray, max_f_half_width: float,
+                     image_height: int, frame_interval_s: Optional[float] = None) -> tuple[bool, str, np.ndarray]:
+    """(determined, reason, bounds to report) from the bundle adjustment (docs/sog.md §24).
+
+    A failed, non-converged or implausible adjustment (f outside what the prior allows, a line delay
+    no shutter has, too few tracks) is never the reported value: not determined, the prior's bounds.
+    Otherwise the bounds are the data's, the adjustment's 99 % (clustered by track and keyframe),
+    and the calibration is determined when f's interval is within +-``max_f_half_width`` of f."""
+    if adj is None:
         return False, f"the bundle adjustment failed ({error})", prior_bounds.copy()
-    f = float(ba.camera[0])
-    half_all = Z_99 * np.sqrt(np.diag(bundle_covariance(ba, cut)))
-    reported = np.c_[ba.camera - half_all, ba.camera + half_all]
+    camera = np.asarray(adj.camera_params, float)
+    reported = np.asarray(adj.bounds_99_two_way[:5], float)
+    f = float(camera[0])
     lo, hi = reported[0]
-    half = 0.5 * float(hi - lo) / f
-    spread = (f"f {f:.1f} px, 99 % [{lo:.1f}, {hi:.1f}] (+-{100 * half:.1f} %: clustered by feature track and "
-              "keyframe, plus the tracks' drift)")
+    half = 0.5 * float(hi - lo) / f if f > 0 else np.inf
+    spread = (f"f {f:.1f} px, 99 % [{lo:.1f}, {hi:.1f}] (+-{100 * half:.1f} %, clustered by feature track and "
+              "keyframe)")
+    points = int(len(adj.point_anchor)) - int(adj.dropped_points)
     problem = ""
-    if ba.status <= 0 and not ba.step_sigma <= BUNDLE_STEP_SIGMA:
-        # A block of keyframes collapsing with its points (docs/sog.md §21) leaves near-singular normal
-        # equations and an astronomic step: say so rather than print 1e80.
-        far = f"{ba.step_sigma:.2f} sigma" if ba.step_sigma < 1e3 else "over 1000 sigma (near-singular normal equations)"
-        problem = f"the bundle adjustment did not converge ({ba.message}; the camera is still {far} from the minimum)"
-    elif ba.points < MIN_BUNDLE_POINTS:
-        problem = (f"only {ba.points} feature tracks span 3 or more keyframes (>= {MIN_BUNDLE_POINTS} needed for "
-                   "a bound; a textured scene seen for longer?)")
-    elif cut is None:
-        problem = f"the drift check (the adjustment over tracks cut into pieces) failed ({error})"
-    elif _impossible_readout(ba, image_height):
-        lo, hi = ba.line_delay_bounds_99_s
-        problem = (f"the adjustment's line delay ({1e6 * ba.line_delay_s:.1f} us/row, 99 % [{1e6 * lo:.1f}, "
-                   f"{1e6 * hi:.1f}]) reads the {image_height} rows in more than {MAX_READOUT_FRAMES:g} frame "
-                   f"intervals ({1e3 * ba.extra['frame_interval_s']:.1f} ms): the model does not fit (moving "
-                   "objects, zoom, or stabilisation in the video?)")
-    elif not np.all(np.isfinite(reported)) or not half <= max_f_half_width:
-        problem = (f"the data pin f only to +-{100 * half:.1f} % (bundle adjustment {spread}; determined needs "
-                   f"+-{100 * max_f_half_width:g} %): little rotation, or a mostly sideways motion?")
+    if not adj.converged:
+        far = f"{adj.step_sigma:.2f} sigma" if adj.step_sigma < 1e3 else "over 1000 sigma (near-singular)"
+        problem = f"the bundle adjustment did not converge ({adj.message}; the camera is still {far} from the minimum)"
+    elif not prior_bounds[0, 0] <= f <= prior_bounds[0, 1]:
+        problem = (f"the bundle adjustment ended at f {f:.1f} px, outside the focal lengths the sequence could have "
+                   f"({prior_bounds[0, 0]:.0f}-{prior_bounds[0, 1]:.0f} px): it diverged")
+    elif not adj.covariance_ok or not np.all(np.isfinite(reported)):
+        problem = "the covariance of the adjusted camera could not be computed (near-singular: too little motion?)"
+    elif points < MIN_BUNDLE_POINTS:
+        problem = (f"only {points} feature tracks span 3 or more keyframes (>= {MIN_BUNDLE_POINTS} needed for a bound; "
+                   "a textured scene seen for longer?)")
+    elif _impossible_readout(adj, image_height, frame_interval_s):
+        d_lo, d_hi = adj.bounds_99_two_way[5]
+        problem = (f"the adjustment's line delay ({1e6 * adj.line_delay_s:.1f} us/row, 99 % [{1e6 * d_lo:.1f}, "
+                   f"{1e6 * d_hi:.1f}]) reads the {image_height} rows in more than {MAX_READOUT_FRAMES:g} frame "
+                   f"intervals ({1e3 * frame_interval_s:.1f} ms): the model does not fit (moving objects, zoom, or "
+                   "stabilisation in the video?)")
     if problem:
-        bounds = prior_bounds.copy()
-        bounds[:, 0] = np.minimum(bounds[:, 0], ba.camera)
-        bounds[:, 1] = np.maximum(bounds[:, 1], ba.camera)
-        return False, problem, bounds
-    return True, (f"bundle adjustment over {ba.points} tracks and {ba.keyframes} keyframes: {spread}, "
-                  f"residual {ba.sigma_px:.2f} px"), reported
+        return False, problem, prior_bounds.copy()
+    if not half <= max_f_half_width:
+        return False, (f"the data pin f only to +-{100 * half:.1f} % ({spread}; determined needs "
+                       f"+-{100 * max_f_half_width:g} %): little rotation, or a mostly sideways motion?"), reported
+    return True, (f"bundle adjustment over {points} tracks and {len(adj.keyframe_poses)} keyframes: {spread}, "
+                  f"residual {adj.sigma_px:.2f} px"), reported
 
 
 def selfcalib_verdict(result: SelfCalibResult) -> Verdict:

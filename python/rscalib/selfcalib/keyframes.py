@@ -46,6 +46,35 @@ class FilterPoses:
         return np.array([np.r_[self.p_cw[f], rotation_matrix_to_vector(self.R_cw[f])] for f in frames])
 
 
+@dataclass
+class KeyframePoses:
+    """Poses at some frames (an adjustment's keyframes): ``frames`` (K,), ``states`` (K, 6) [p; phi] T_cw."""
+
+    frames: np.ndarray
+    states_cw: np.ndarray
+
+    def states(self, frames: np.ndarray) -> np.ndarray:
+        index = {int(f): i for i, f in enumerate(self.frames)}
+        missing = [int(f) for f in frames if int(f) not in index]
+        if missing:
+            raise InputError(f"no pose at frames {missing[:5]}")
+        return self.states_cw[[index[int(f)] for f in frames]]
+
+
+def subset(observations: KeyframeObservations, tracks: int, min_keyframes: int) -> KeyframeObservations:
+    """The observations of the ``tracks`` tracks seen in most keyframes (a quick first adjustment:
+    few points, the same keyframes)."""
+    ids, counts = np.unique(observations.track_id, return_counts=True)
+    keep = ids[np.argsort(-counts, kind="stable")[:tracks]]
+    keep = keep[np.isin(keep, ids[counts >= min_keyframes])]
+    rows = np.flatnonzero(np.isin(observations.track_id, keep))
+    sigma = observations.position_sigma[rows] if len(observations.position_sigma) == len(observations) \
+        else np.full(len(rows), np.nan)
+    return KeyframeObservations(observations.frame[rows], observations.t_s[rows], observations.track_id[rows],
+                                observations.uv_px[rows], observations.velocity_px_s[rows], observations.keyframes,
+                                sigma)
+
+
 def triangulate(rays: np.ndarray, views: np.ndarray, point: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """World points (P, 3) of every point index from its normalised rays (N, 3, z = 1) in the views
     (N,) of ``poses`` (K, 6): linear (DLT) triangulation; NaN rows where it fails or the point is not
@@ -68,9 +97,9 @@ def triangulate(rays: np.ndarray, views: np.ndarray, point: np.ndarray, poses: n
     return points
 
 
-def adjustment_start(observations: KeyframeObservations, poses: FilterPoses, camera: CameraModel) -> KeyframeTracks:
-    """The adjustment's start (KeyframeTracks) from the tracks at keyframes, the filter's poses at
-    those keyframes and a camera to undistort with."""
+def adjustment_start(observations: KeyframeObservations, poses, camera: CameraModel) -> KeyframeTracks:
+    """The adjustment's start (KeyframeTracks) from the tracks at keyframes, poses at those keyframes
+    (FilterPoses or KeyframePoses: anything with .states(frames)) and a camera to undistort with."""
     keyframes = np.asarray(observations.keyframes, np.int64)
     index_of = {int(f): i for i, f in enumerate(keyframes)}
     views = np.array([index_of[int(f)] for f in observations.frame], np.int64)
@@ -99,3 +128,22 @@ def _depths(points, views, point, poses, good) -> np.ndarray:
     rows = good[point]
     R = np.array([rotation_vector_to_matrix(p[3:]) for p in poses])
     return (np.einsum("nij,nj->ni", R[views[rows]], points[point[rows]]) + poses[views[rows], :3])[:, 2]
+
+
+def halves(observations: KeyframeObservations, min_keyframes: int) -> list:
+    """The observations of the first and the second half of the keyframes (split at the middle
+    keyframe), each keeping the tracks seen in at least ``min_keyframes`` of its own keyframes:
+    two independent estimates of the same camera (the self-check, docs/sog.md §24)."""
+    keyframes = np.asarray(observations.keyframes, np.int64)
+    middle = len(keyframes) // 2
+    parts = []
+    for own in (keyframes[:middle], keyframes[middle:]):
+        rows = np.flatnonzero(np.isin(observations.frame, own))
+        ids, counts = np.unique(observations.track_id[rows], return_counts=True)
+        rows = rows[np.isin(observations.track_id[rows], ids[counts >= min_keyframes])]
+        sigma = observations.position_sigma[rows] if len(observations.position_sigma) == len(observations) \
+            else np.full(len(rows), np.nan)
+        parts.append(KeyframeObservations(observations.frame[rows], observations.t_s[rows],
+                                          observations.track_id[rows], observations.uv_px[rows],
+                                          observations.velocity_px_s[rows], own, sigma))
+    return parts

@@ -60,6 +60,118 @@ class FrontEndOptions:
                        max_search_half_px=self.max_search_half_px * scale)
 
 
+_TRACK_RANSAC_METHODS = ("ransac", "magsac")
+_REFERENCE_WIDTH = 640.0   # TrackOptions' pixel sizes are for 640x480; scaled with the width
+
+
+@dataclass(frozen=True)
+class TrackOptions:
+    """Options of :class:`FeatureTracker`. Pixel sizes and counts are for 640x480 images and are
+    scaled to the image (:meth:`scaled`: lengths with the width, counts with the area)."""
+
+    # --- corners
+    target_tracks: int = 800           # live tracks wanted at 640x480 (500-1500 asked; the cost is ~linear)
+    grid_cols: int = 8                 # corners spread over cells of ~80x80 px ...
+    grid_rows: int = 6                 # ... each asking for its share of target_tracks
+    min_distance_px: float = 8.0       # new corners this far from live tracks and from each other
+    corner_quality: float = 0.01       # goodFeaturesToTrack qualityLevel (relative to the best corner)
+    corner_block_size: int = 5         # its structure-tensor window: 5 is steadier than 3 on H.264
+    detect_every_frames: int = 3       # look for corners this often (a search costs ~3 ms at 640x480) ...
+    detect_below_fraction: float = 0.25  # ... and every frame while fewer than this share are live
+    corner_half_resolution_from_px: int = 480  # images this wide look for corners at half resolution
+    #                                            (4x cheaper; the first view, not the corner, is the point)
+    # --- KLT
+    klt_window_px: int = 11            # 11x11 at 640 (9x9 at 320): the anchoring, not KLT, sets precision
+    klt_levels: int = 2                # from the constant-velocity guess: ~25 px of surprise a frame
+    klt_iterations: int = 10
+    klt_epsilon_px: float = 0.03
+    fb_max_px: float = 0.5             # forward-backward check (not scaled: LK's precision is in px)
+    klt_gain: bool = True              # scale the previous frame to the current one's brightness first:
+    #                                    LK is not gain-invariant; auto-exposure steps biased it by ~2 px
+    # --- geometric verification
+    ransac_px: float = 1.0             # frame pair: epipolar / transfer threshold
+    keyframe_ransac_px: float = 1.5    # keyframe pair (after anchoring: a longer baseline)
+    homography_share: float = 0.9      # H explains this share of F's inliers: test with H instead ...
+    homography_px_factor: float = 2.0  # ... at this times the threshold (parallax of near points)
+    min_verify_points: int = 15        # fewer correspondences: no test possible, all kept
+    ransac_method: str = "ransac"      # "magsac" (USAC) costs 10-30 ms a pair here, RANSAC ~1 ms
+    # --- keyframes
+    keyframe_max_gap_frames: int = 5   # anchoring and keyframes at least this often
+    keyframe_displacement_px: float = 15.0  # ... or when the median track moved this far
+    keyframe_min_survival: float = 0.8      # ... or when fewer of the last keyframe's tracks are left
+    # --- anchoring (inverse-compositional affine Lucas-Kanade against each track's first view)
+    anchor: bool = True
+    anchor_half_px: int = 9            # 19x19 first view (sqrt-scaled: 13x13 at 320x240; 11x11 there
+    #                                    gave 0.21 px RMS, 15x15 0.16, 21x21 more at room creases)
+    anchor_iterations: int = 3         # started at KLT's position and the last warp: 3 suffice
+    anchor_min_zncc: float = 0.8       # below: the first view no longer matches (on_anchor_failure)
+    anchor_max_shift_px: float = 3.0   # anchored vs KLT position (KLT can slip ~2 px in an exposure step)
+    on_anchor_failure: str = "end"     # "end" the track, or "reanchor" (a new first view at KLT's
+    #                                    position: the track goes on, with that position's error kept)
+    anchor_max_scale: float = 1.6      # warp's singular values beyond [1/this, this]: no longer matches
+    max_position_sigma: float = 0.5    # no track from a first view that fixes a position this badly
+    #                                    (TrackSet.position_sigma, px per grey level of noise): on
+    #                                    look-around 640 the tracks above 0.6 had a median RMS error
+    #                                    of 0.7-0.9 px, those below 0.29 0.12 px (§22)
+    border_px: int = 2                 # tracks keep their patch this far inside the image
+    # --- re-identification
+    reid: bool = True
+    reid_max_gap_frames: int = 300     # a lost track can come back within ~10 s at 30 fps
+    reid_pool_size: int = 4000         # lost tracks remembered (oldest forgotten first)
+    reid_ratio: float = 0.8            # Lowe's ratio test between the two best lost tracks
+    reid_max_hamming: int = 64         # of ORB's 256 bits
+    reid_min_zncc: float = 0.85        # the returning corner must also align with the first view
+    reid_max_shift_px: float = 2.0     # ... within this of the corner
+    reid_geometry_px: float = 2.0      # RANSAC check between a keyframe of the lost track and now
+    reid_neighbour_px: float = 20.0    # ... and its motion since then within this (or 3 spreads) of
+    #                                    its 8 nearest live tracks' (an epipolar line is long)
+    reid_search_keyframes: int = 60    # keyframes searched for one that saw the candidates
+
+    def __post_init__(self) -> None:
+        """InputError (one line) for values that mean nothing: counts and sizes must be positive
+        whole numbers (klt_levels and border_px may be 0), lengths positive, shares in (0, 1]."""
+        from dataclasses import fields
+
+        shares = {"corner_quality", "detect_below_fraction", "homography_share", "keyframe_min_survival",
+                  "anchor_min_zncc", "reid_ratio", "reid_min_zncc"}
+        choices = {"ransac_method": _TRACK_RANSAC_METHODS, "on_anchor_failure": ("end", "reanchor")}
+        for item in fields(self):
+            value = getattr(self, item.name)
+            if item.name in choices:
+                if value not in choices[item.name]:
+                    raise InputError(f"TrackOptions.{item.name}: {value!r} is not one of {', '.join(choices[item.name])}")
+            elif isinstance(value, bool) or item.type in ("bool", bool):
+                if not isinstance(value, bool):
+                    raise InputError(f"TrackOptions.{item.name}: give True or False, not {value!r}")
+            elif item.type in ("int", int):
+                least = 0 if item.name in ("klt_levels", "border_px") else 1
+                if not (isinstance(value, int) and value >= least):
+                    raise InputError(f"TrackOptions.{item.name}: a whole number >= {least}, not {value!r}")
+            else:
+                ok = isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+                if not ok or (item.name in shares and value > 1):
+                    limits = "in (0, 1]" if item.name in shares else "a positive number"
+                    raise InputError(f"TrackOptions.{item.name}: {limits}, not {value!r}")
+
+    def scaled(self, image_size: tuple[int, int]) -> TrackOptions:
+        """These options for ``image_size`` (width, height)."""
+        width, height = image_size
+        scale = width / _REFERENCE_WIDTH
+        area = width * height / (_REFERENCE_WIDTH * 480.0)
+
+        def odd(n: float) -> int:
+            return max(5, int(round(n)) | 1)
+
+        return replace(self, target_tracks=max(50, int(round(self.target_tracks * area))),
+                       min_distance_px=max(3.0, self.min_distance_px * scale),
+                       klt_window_px=odd(self.klt_window_px * math.sqrt(scale)),
+                       keyframe_displacement_px=self.keyframe_displacement_px * scale,
+                       reid_neighbour_px=self.reid_neighbour_px * scale,
+                       max_position_sigma=self.max_position_sigma * scale,   # ∝ 1 / gradient per px
+                       anchor_half_px=max(3, int(round(self.anchor_half_px * math.sqrt(scale)))))
+
+
+
 @dataclass(frozen=True)
 class SelfCalibOptions:
     """How `rscalib selfcalib` estimates f, the principal point and the radial distortion.
@@ -85,6 +197,13 @@ class SelfCalibOptions:
     # clean rendered room sequences it changes nothing (docs/sog.md §15).
     ransac_hypotheses: int = 100
     front_end: FrontEndOptions = field(default_factory=FrontEndOptions)
+    # --- the bundle adjustment (docs/sog.md §24) over the tracks of tracks.py (TrackOptions)
+    line_delay_from: Optional[str] = None       # an `rscalib linedelay` result.json: its line delay and sigma
+    #                                             are the adjustment's prior (a board filmed once helps later videos)
+    tracks: TrackOptions = field(default_factory=TrackOptions)
+    robust_loss_scale_px: float = 1.0           # soft-L1 loss: residuals beyond ~this count less (KLT slips)
+    max_keyframes: int = 300                    # the adjustment's keyframes at most (evenly thinned): its
+    #                                             pose block is dense in the covariance
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.pixel_size_mm) and 1e-4 <= self.pixel_size_mm <= 1.0):
@@ -108,6 +227,14 @@ class SelfCalibOptions:
                 raise InputError(f"{name} must be in (0, 1], not {getattr(self, name)!r}")
         if not isinstance(self.front_end, FrontEndOptions):
             raise InputError("front_end must be a FrontEndOptions")
+        if not isinstance(self.tracks, TrackOptions):
+            raise InputError("tracks must be a TrackOptions")
+        if self.line_delay_from is not None and self.line_delay_s is not None:
+            raise InputError("give the line delay once: --line-delay or --line-delay-from")
+        if not (math.isfinite(self.robust_loss_scale_px) and self.robust_loss_scale_px > 0):
+            raise InputError(f"the robust loss scale must be a positive number of px, not {self.robust_loss_scale_px!r}")
+        if not (isinstance(self.max_keyframes, int) and self.max_keyframes >= 3):
+            raise InputError(f"max_keyframes must be at least 3, not {self.max_keyframes!r}")
 
     @property
     def bundle(self) -> bool:

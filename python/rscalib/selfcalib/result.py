@@ -54,6 +54,7 @@ class SelfCalibResult:
     adjustment_error: str = ""
     line_delay_given: Optional[tuple] = None      # (mean s/row, sigma s/row or 0 when held) given by the user
     tracks: dict = field(default_factory=dict)   # the tracker's counts (tracks.TrackSet.stats) and what was used
+    self_check: Optional[dict] = None            # the halves' adjustments (engine._halves_check): z, widen
     estimate_from: str = "filter"
 
     def adjustment_bounds_99(self) -> Optional[np.ndarray]:
@@ -114,7 +115,7 @@ class SelfCalibResult:
                    adjustment_bounds_99=None if self.adjustment is None else self.adjustment_bounds_99().tolist(),
                    adjustment_error=self.adjustment_error,
                    line_delay_given=None if self.line_delay_given is None else list(self.line_delay_given),
-                   tracks=self.tracks,
+                   tracks=self.tracks, self_check=self.self_check,
                    **self._line_delay_summary(),
                    max_map_size=int(self.history.map_size.max()) if len(self.history) else 0,
                    history=self.history.summary_dict())

@@ -1,4 +1,4 @@
-"""Feature tracks made for the self-calibration bundle adjustment (issue 30; docs/sog.md §22).
+"""Feature tracks made for the self-calibration bundle adjustment (issue 30; docs/sog.md §23).
 
 The filter's front end (:mod:`front_end`) keeps the ~100 features the EKF bank can afford. The
 bundle adjustment wants many long tracks that do not drift, each observation with its image velocity
@@ -32,13 +32,13 @@ what is being estimated):
   adjustment its observations.
 
 Only the previous frame is kept; per track a small patch and a descriptor. Frames are an iterable of
-``(time_s, grayscale uint8 image)`` (:func:`rscalib.selfcalib.calibrate.read_gray_frames`).
+``(time_s, grayscale uint8 image)`` (:func:`rscalib.io.video.read_gray_frames`).
 """
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 from typing import Iterable, Optional
 
 import cv2
@@ -46,92 +46,11 @@ import numpy as np
 
 from .._progress import Progress, ProgressArg
 from ..errors import InputError
+from .options import TrackOptions
 
 __all__ = ["KeyframeObservations", "TrackOptions", "TrackSet", "FeatureTracker", "fit_two_view_model",
            "geometric_inliers", "image_velocities", "track_features", "two_view_distance"]
 
-_REFERENCE_WIDTH = 640.0   # TrackOptions' pixel sizes are for 640x480; scaled with the width
-
-
-@dataclass(frozen=True)
-class TrackOptions:
-    """Options of :class:`FeatureTracker`. Pixel sizes and counts are for 640x480 images and are
-    scaled to the image (:meth:`scaled`: lengths with the width, counts with the area)."""
-
-    # --- corners
-    target_tracks: int = 800           # live tracks wanted at 640x480 (500-1500 asked; the cost is ~linear)
-    grid_cols: int = 8                 # corners spread over cells of ~80x80 px ...
-    grid_rows: int = 6                 # ... each asking for its share of target_tracks
-    min_distance_px: float = 8.0       # new corners this far from live tracks and from each other
-    corner_quality: float = 0.01       # goodFeaturesToTrack qualityLevel (relative to the best corner)
-    corner_block_size: int = 5         # its structure-tensor window: 5 is steadier than 3 on H.264
-    detect_every_frames: int = 3       # look for corners this often (a search costs ~3 ms at 640x480) ...
-    detect_below_fraction: float = 0.25  # ... and every frame while fewer than this share are live
-    corner_half_resolution_from_px: int = 480  # images this wide look for corners at half resolution
-    #                                            (4x cheaper; the first view, not the corner, is the point)
-    # --- KLT
-    klt_window_px: int = 11            # 11x11 at 640 (9x9 at 320): the anchoring, not KLT, sets precision
-    klt_levels: int = 2                # from the constant-velocity guess: ~25 px of surprise a frame
-    klt_iterations: int = 10
-    klt_epsilon_px: float = 0.03
-    fb_max_px: float = 0.5             # forward-backward check (not scaled: LK's precision is in px)
-    klt_gain: bool = True              # scale the previous frame to the current one's brightness first:
-    #                                    LK is not gain-invariant; auto-exposure steps biased it by ~2 px
-    # --- geometric verification
-    ransac_px: float = 1.0             # frame pair: epipolar / transfer threshold
-    keyframe_ransac_px: float = 1.5    # keyframe pair (after anchoring: a longer baseline)
-    homography_share: float = 0.9      # H explains this share of F's inliers: test with H instead ...
-    homography_px_factor: float = 2.0  # ... at this times the threshold (parallax of near points)
-    min_verify_points: int = 15        # fewer correspondences: no test possible, all kept
-    ransac_method: str = "ransac"      # "magsac" (USAC) costs 10-30 ms a pair here, RANSAC ~1 ms
-    # --- keyframes
-    keyframe_max_gap_frames: int = 5   # anchoring and keyframes at least this often
-    keyframe_displacement_px: float = 15.0  # ... or when the median track moved this far
-    keyframe_min_survival: float = 0.8      # ... or when fewer of the last keyframe's tracks are left
-    # --- anchoring (inverse-compositional affine Lucas-Kanade against each track's first view)
-    anchor: bool = True
-    anchor_half_px: int = 9            # 19x19 first view (sqrt-scaled: 13x13 at 320x240; 11x11 there
-    #                                    gave 0.21 px RMS, 15x15 0.16, 21x21 more at room creases)
-    anchor_iterations: int = 3         # started at KLT's position and the last warp: 3 suffice
-    anchor_min_zncc: float = 0.8       # below: the first view no longer matches (on_anchor_failure)
-    anchor_max_shift_px: float = 3.0   # anchored vs KLT position (KLT can slip ~2 px in an exposure step)
-    on_anchor_failure: str = "end"     # "end" the track, or "reanchor" (a new first view at KLT's
-    #                                    position: the track goes on, with that position's error kept)
-    anchor_max_scale: float = 1.6      # warp's singular values beyond [1/this, this]: no longer matches
-    max_position_sigma: float = 0.5    # no track from a first view that fixes a position this badly
-    #                                    (TrackSet.position_sigma, px per grey level of noise): on
-    #                                    look-around 640 the tracks above 0.6 had a median RMS error
-    #                                    of 0.7-0.9 px, those below 0.29 0.12 px (§22)
-    border_px: int = 2                 # tracks keep their patch this far inside the image
-    # --- re-identification
-    reid: bool = True
-    reid_max_gap_frames: int = 300     # a lost track can come back within ~10 s at 30 fps
-    reid_pool_size: int = 4000         # lost tracks remembered (oldest forgotten first)
-    reid_ratio: float = 0.8            # Lowe's ratio test between the two best lost tracks
-    reid_max_hamming: int = 64         # of ORB's 256 bits
-    reid_min_zncc: float = 0.85        # the returning corner must also align with the first view
-    reid_max_shift_px: float = 2.0     # ... within this of the corner
-    reid_geometry_px: float = 2.0      # RANSAC check between a keyframe of the lost track and now
-    reid_neighbour_px: float = 20.0    # ... and its motion since then within this (or 3 spreads) of
-    #                                    its 8 nearest live tracks' (an epipolar line is long)
-    reid_search_keyframes: int = 60    # keyframes searched for one that saw the candidates
-
-    def scaled(self, image_size: tuple[int, int]) -> TrackOptions:
-        """These options for ``image_size`` (width, height)."""
-        width, height = image_size
-        scale = width / _REFERENCE_WIDTH
-        area = width * height / (_REFERENCE_WIDTH * 480.0)
-
-        def odd(n: float) -> int:
-            return max(5, int(round(n)) | 1)
-
-        return replace(self, target_tracks=max(50, int(round(self.target_tracks * area))),
-                       min_distance_px=max(3.0, self.min_distance_px * scale),
-                       klt_window_px=odd(self.klt_window_px * math.sqrt(scale)),
-                       keyframe_displacement_px=self.keyframe_displacement_px * scale,
-                       reid_neighbour_px=self.reid_neighbour_px * scale,
-                       max_position_sigma=self.max_position_sigma * scale,   # ∝ 1 / gradient per px
-                       anchor_half_px=max(3, int(round(self.anchor_half_px * math.sqrt(scale)))))
 
 
 @dataclass
@@ -210,9 +129,8 @@ class TrackSet:
 _RANSAC_METHODS = {"ransac": (cv2.FM_RANSAC, cv2.RHO), "magsac": (cv2.USAC_MAGSAC, cv2.USAC_MAGSAC)}
 
 
-def geometric_inliers(uv0: np.ndarray, uv1: np.ndarray, threshold_px: float, homography_share: float = 0.9,
-                      homography_px_factor: float = 2.0, min_points: int = 15, method: str = "ransac"
-                      ) -> np.ndarray:
+def geometric_inliers(uv0: np.ndarray, uv1: np.ndarray, threshold_px: float, homography_share: float,
+                      homography_px_factor: float, min_points: int = 15, method: str = "ransac") -> np.ndarray:
     """Which correspondences ``uv0[i] <-> uv1[i]`` agree with one rigid scene: inliers of a RANSAC
     fundamental matrix (refitted on its inliers) at ``threshold_px`` (Sampson distance); but when a
     homography explains at least ``homography_share`` of those inliers, the views are (nearly)
@@ -229,7 +147,7 @@ def geometric_inliers(uv0: np.ndarray, uv1: np.ndarray, threshold_px: float, hom
     return two_view_distance(model, uv0, uv1) <= threshold_px * (homography_px_factor if model[0] == "H" else 1.0)
 
 
-def fit_two_view_model(uv0: np.ndarray, uv1: np.ndarray, threshold_px: float, homography_share: float = 0.9,
+def fit_two_view_model(uv0: np.ndarray, uv1: np.ndarray, threshold_px: float, homography_share: float,
                        min_points: int = 15, method: str = "ransac") -> Optional[tuple[str, np.ndarray]]:
     """("F", F) or ("H", H) as :func:`geometric_inliers` chooses them; None when it cannot tell
     (fewer than ``min_points`` correspondences, or no model found)."""

@@ -1,4 +1,4 @@
-"""The renderer's truth for image tracks of a realistic room sequence (issue 30; docs/sog.md §22).
+"""The renderer's truth for image tracks of a realistic room sequence (issue 30; docs/sog.md §23).
 
 A track of a front end starts at a pixel of its first frame; the 3-D point it follows is where the
 true ray of that pixel (at that row's exposure time) meets the room's box (the realistic scenes of

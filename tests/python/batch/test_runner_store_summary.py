@@ -99,6 +99,36 @@ def test_store_running_never_overwrites_an_answer(tmp_path):
         ResultStore(tmp_path / "elsewhere" / STORE_FILE)
 
 
+def _table(page: str) -> tuple[list, dict]:
+    """The index's header and its rows by job id, read with the standard library's HTML parser."""
+    from html.parser import HTMLParser
+
+    class Table(HTMLParser):
+        def __init__(self):
+            super().__init__()
+            self.rows, self.cell = [], None
+
+        def handle_starttag(self, tag, attrs):
+            if tag == "tr":
+                self.rows.append([])
+            elif tag in ("td", "th"):
+                self.cell = ""
+
+        def handle_endtag(self, tag):
+            if tag in ("td", "th") and self.cell is not None:
+                self.rows[-1].append(self.cell.strip())
+                self.cell = None
+
+        def handle_data(self, data):
+            if self.cell is not None:
+                self.cell += data
+
+    parser = Table()
+    parser.feed(page)
+    header, *rows = [r for r in parser.rows if r]
+    return header, {r[0]: r for r in rows}
+
+
 def test_index_and_status(tmp_path):
     store = ResultStore(tmp_path / STORE_FILE, create=True)
     rows = [("a", "m1", "linedelay", "ok", 3.01e-5, 1e-7), ("b", "m1", "linedelay", "not_trusted", 2.9e-5, 3e-7),
@@ -116,6 +146,11 @@ def test_index_and_status(tmp_path):
     assert "6 jobs: done 4 (ok 2, not_trusted 1, bad_input 1), running 1, queued 0, failed 1 (killed 1)" in index
     assert (tmp_path / "line_delay_by_mode.png").stat().st_size > 0
     assert format_value(store.row("a")) == "d = 30.1 ± 0.1 µs/row"
+    header, cells = _table(index)
+    for name in header[5:9]:                          # the number columns: one unit each, in the header
+        assert name.endswith(("(µs/row)", "(px)")), header
+    a = dict(zip(header, cells["a"]))
+    assert a["line delay (µs/row)"] == "30.1" and a["σ line delay (µs/row)"] == "0.1" and a["f (px)"] == ""
     lines = status_lines(tmp_path)
     assert "running 1" in lines[0] and "the batch is running" in lines[1]
     assert "  e: killed: why" in lines and "  d: bad_input: why" in lines

@@ -3,7 +3,6 @@ and the report (issue 4), via the CLI and the Python API."""
 import json
 import subprocess
 import sys
-import time
 
 import pytest
 
@@ -33,11 +32,9 @@ def test_linedelay_cli_on_a_rendered_checkerboard_video(checkerboard_video, tmp_
     truth = json.loads((sim / "truth.json").read_text())
     cache = tmp_path / "cache"
     env_args = ["--target", sim / "target.yaml", "--camera", sim / "camera.yaml"]
-    started = time.perf_counter()
     proc = subprocess.run([*CLI, "linedelay", sim / "video.avi", *env_args, "--out", tmp_path / "run1"],
                           capture_output=True, text=True, timeout=600,
                           env={**__import__("os").environ, "RSCALIB_CACHE_DIR": str(cache)})
-    first_s = time.perf_counter() - started
     assert proc.returncode == 0, proc.stderr
     result = json.loads((tmp_path / "run1" / "result.json").read_text())
     d, std = result["line_delay_s"], result["line_delay_std_s"]
@@ -59,15 +56,14 @@ def test_linedelay_cli_on_a_rendered_checkerboard_video(checkerboard_video, tmp_
     assert gyroflow["asymmetrical"] is True
     html = (tmp_path / "run1" / "report.html").read_text()
     assert html.count("data:image/png;base64,") >= 6
-    # a re-run takes the detections from the cache
-    started = time.perf_counter()
+    # a re-run takes the detections from the cache (said, and the same answer; no timing on a shared machine)
     again = subprocess.run([*CLI, "linedelay", sim / "video.avi", *env_args, "--out", tmp_path / "run2"],
                            capture_output=True, text=True, timeout=600,
                            env={**__import__("os").environ, "RSCALIB_CACHE_DIR": str(cache)})
     assert again.returncode == 0, again.stderr
     assert "(cached)" in again.stderr
     assert json.loads((tmp_path / "run2" / "result.json").read_text())["line_delay_s"] == pytest.approx(d, rel=1e-9)
-    assert time.perf_counter() - started < first_s
+    assert any(cache.rglob("*")), "nothing in the detection cache"
 
 
 def test_the_python_front_door_gives_the_cli_answer_to_the_last_digit(checkerboard_video, tmp_path):

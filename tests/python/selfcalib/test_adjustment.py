@@ -1,12 +1,16 @@
 """The C++ (Ceres) self-calibration bundle adjustment through rscalib.selfcalib.adjustment (docs/sog.md §22).
 
 Oracles: the simulated truth (rscalib.sim.scene_features) and the SciPy adjustment
-(rscalib.selfcalib.bundle.bundle_adjust) on the same observations.
+(scipy_reference_bundle.bundle_adjust beside this file, the product's former engine) on the same
+observations.
 """
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import os
+import pathlib
+import sys
 
 import numpy as np
 import pytest
@@ -15,9 +19,23 @@ from scipy.spatial.transform import Rotation
 from rscalib import _core
 from rscalib.errors import InputError
 from rscalib.selfcalib.adjustment import KeyframeTracks, adjust, anchored_points
-from rscalib.selfcalib.bundle import FeatureTracks, build_problem, bundle_adjust, track_velocity
 from rscalib.selfcalib.prior import PAPER_PIXEL_SIZE_MM
 from rscalib.sim.scene_features import PAPER_CAMERA, HandheldRoomMotion, simulate_sequence
+
+
+def _load_reference():
+    """The SciPy reference adjustment beside this file (a test module, not in the package)."""
+    path = pathlib.Path(__file__).with_name("scipy_reference_bundle.py")
+    spec = importlib.util.spec_from_file_location("scipy_reference_bundle", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module     # dataclasses look their module up by name
+    spec.loader.exec_module(module)
+    return module
+
+
+_reference = _load_reference()
+FeatureTracks, build_problem = _reference.FeatureTracks, _reference.build_problem
+bundle_adjust, track_velocity = _reference.bundle_adjust, _reference.track_velocity
 
 NOISE_PX = 0.5
 LINE_DELAY_S = 60e-6
@@ -98,7 +116,7 @@ def _keyframe_tracks(tracks: FeatureTracks) -> KeyframeTracks:
 
 @pytest.fixture(scope="module")
 def walk():
-    """A 4 s hand-held room walk, global shutter, 0.5 px noise (the walk of test_bundle.py)."""
+    """A 4 s hand-held room walk, global shutter, 0.5 px noise ."""
     return simulate_sequence(duration_s=4.0, seed=3, noise_px=NOISE_PX)
 
 

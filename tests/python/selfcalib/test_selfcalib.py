@@ -99,15 +99,15 @@ def test_selfcalib_cli_recovers_the_focal_length(room_sequence, tmp_path):
     assert result["frames_processed"] == 150
     assert result["gaussians_left"] < 108
     # the bundle adjustment over the filter's tracks is the estimate; its bounds hold the truth
-    assert result["estimate_from"] == "bundle adjustment" and result["bundle"]["f"] == result["f"]
+    assert result["estimate_from"] == "bundle adjustment" and result["adjustment"]["estimate"][0] == result["f"]
     assert result["determined"] is (proc.returncode == 0)
     for name, value in zip(("f", "cx", "cy", "k1", "k2"), truth):
-        lo, hi = result["bundle_bounds_99"][("f", "cx", "cy", "k1", "k2").index(name)]
+        lo, hi = result["adjustment_bounds_99"][("f", "cx", "cy", "k1", "k2").index(name)]
         assert lo <= value <= hi, (name, value, lo, hi)
     # no --line-delay: the adjustment estimated it; the render has a global shutter (0 s/row)
     assert json.loads((room_sequence / "truth.json").read_text()).get("line_delay_s", 0.0) == 0.0
-    lo, hi = result["bundle_line_delay_bounds_99_s"]
-    assert lo <= 0.0 <= hi and lo <= result["bundle_line_delay_s"] <= hi
+    lo, hi = result["line_delay_bounds_99_s"]
+    assert lo <= 0.0 <= hi and lo <= result["line_delay_estimated_s"] <= hi
     assert "line delay estimated" in proc.stdout
     assert len(result["history"]["gaussians"]) == 150
     assert result["provenance"]["command"] == "selfcalib" and result["baseline"] is None

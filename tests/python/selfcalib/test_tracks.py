@@ -216,7 +216,7 @@ def test_geometric_check_removes_injected_wrong_matches(scene):
     wrong = rng.choice(300, 30, replace=False)
     # a moving patch: its matches move together, 4-8 px off the scene's motion
     uv1[wrong] += rng.uniform(4, 8) * np.array([np.cos(1.0), np.sin(1.0)]) + rng.normal(0, 0.2, (30, 2))
-    inliers = geometric_inliers(uv0, uv1, 1.0)
+    inliers = geometric_inliers(uv0, uv1, 1.0, TrackOptions().homography_share, TrackOptions().homography_px_factor)
     right = np.setdiff1d(np.arange(300), wrong)
     assert inliers[right].mean() > 0.97
     assert inliers[wrong].sum() <= 1
@@ -316,7 +316,7 @@ def test_bad_input_is_refused_with_a_clear_message():
     with pytest.raises(InputError, match="too small"):
         FeatureTracker((16, 16))
     with pytest.raises(InputError, match="RANSAC method"):
-        geometric_inliers(np.zeros((20, 2)), np.zeros((20, 2)), 1.0, method="lmeds")
+        geometric_inliers(np.zeros((20, 2)), np.zeros((20, 2)), 1.0, 0.9, 2.0, method="lmeds")
 
 
 def test_no_track_starts_on_an_edge_and_position_sigma_ranks_first_views(wandering):

@@ -1,5 +1,5 @@
 #pragma once
-// A point in inverse depth anchored in a keyframe (docs/sog.md §22): three unknowns (a, b, rho),
+// A point in inverse depth anchored in a keyframe (docs/sog.md §23): three unknowns (a, b, rho),
 // the point in the anchor camera's frame being (a, b, 1) / rho. Seen from a keyframe j, the
 // projection is computed from h = rho x_cj, never dividing by rho:
 //   h = R_j R_a^T ((a, b, 1) - rho p_a) + rho p_j

@@ -1,5 +1,5 @@
 #pragma once
-// The scale gauge of the bundle adjustment (docs/sog.md §22): one keyframe's pose moves on the
+// The scale gauge of the bundle adjustment (docs/sog.md §23): one keyframe's pose moves on the
 // manifold that keeps its camera centre c = -R^T p at a fixed distance from a fixed point c0
 // (the first keyframe's centre, whose pose is held). With the first pose held, the only freedom
 // of the data left is a scaling about c0; it changes that distance, which is held here, so the

@@ -1,5 +1,5 @@
 #pragma once
-// The self-calibration bundle adjustment (docs/sog.md §22): one shared camera (any camera model,
+// The self-calibration bundle adjustment (docs/sog.md §23): one shared camera (any camera model,
 // a mask of its free parameters), the rolling shutter's line delay (held, estimated, or estimated
 // with a Gaussian prior), a pose per keyframe and an anchored inverse-depth point per feature
 // track (anchored_point.hpp), fitted to the tracks' pixels with a robust loss by Ceres

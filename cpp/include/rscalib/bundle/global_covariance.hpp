@@ -1,6 +1,6 @@
 #pragma once
 // The covariance of the bundle adjustment's global unknowns (the free camera parameters and the
-// line delay) from its linearisation at the minimum (docs/sog.md §22), three ways:
+// line delay) from its linearisation at the minimum (docs/sog.md §23), three ways:
 //   model     sigma^2 [H^-1]_gg, H = sum_o J_o^T w_o J_o, sigma^2 = sum_o w_o |r_o|^2 / dof
 //   by track  sum_c g_c g_c^T G/(G-1), g_c = [H^-1]_g. sum_{o in c} J_o^T w_o r_o over the
 //             observations of point c (cluster-robust: errors correlated along a track count once)

@@ -1,6 +1,6 @@
 #pragma once
 // A Gaussian prior on the line delay (e.g. a `rscalib linedelay` result, mean and sigma), in the
-// units of the pixel residuals (docs/sog.md §22): the negative log-likelihood
+// units of the pixel residuals (docs/sog.md §23): the negative log-likelihood
 //   1/(2 s^2) sum |r_px|^2 + 1/2 ((d - mean) / sigma)^2
 // times s^2 (s: the pixel noise, px) is 1/2 sum |r_px|^2 + 1/2 r^2 with
 //   r = s (d - mean) / sigma.

@@ -1,5 +1,5 @@
 #pragma once
-// The bundle adjustment's reprojection error of one feature observation (docs/sog.md §22):
+// The bundle adjustment's reprojection error of one feature observation (docs/sog.md §23):
 //   r = uv_obs - (pi_theta(h) + u_dot (v_obs - v_ref) d)
 // pi_theta: the camera model (camera/camera_model.hpp: civera-radial, pinhole-radtan,
 // pinhole-equidistant) with its parameters theta as unknowns; h = rho x_c of the anchored point

@@ -1,4 +1,10 @@
-"""Batch bundle adjustment over the tracks of a self-calibration run (issue 11; docs/sog.md §17, §20, §21).
+"""A reference for the tests only: the SciPy bundle adjustment the product used before the C++ (Ceres) one
+(rscalib.selfcalib.adjustment, docs/sog.md §23). Kept as an independent implementation of the same
+model (its own civera-radial projection, Jacobian and covariance) so that tests/python/selfcalib/
+test_adjustment.py and benchmarks/bench_adjustment.py can compare the two on the same observations.
+It is not part of the package.
+
+Batch bundle adjustment over the tracks of a self-calibration run (issue 11; docs/sog.md §17, §20, §21).
 
 The SOG bank (docs/sog.md) is the online engine; this refines its answer offline: one shared
 civera-radial camera ``[f, cx, cy, k1 (mm^-2), k2 (mm^-4)]`` (the filter's parameterisation,
@@ -9,9 +15,6 @@ rolling shutter's line delay is a sixth shared parameter: each observation is pr
 time through its track's image velocity (§21). Covariances: the model's, clustered by track, and
 clustered by track and keyframe (what `rscalib selfcalib` reports, with the drift term of §20).
 
-- :class:`TrackRecorder` wraps any measurement source of :func:`rscalib.selfcalib.driver.run_bank`
-  and, through its ``on_frame`` hook, keeps per frame the used measurements, the bank's merged
-  camera pose and the latest map points (to start the adjustment).
 - :func:`bundle_adjust` runs the adjustment on the recorded :class:`FeatureTracks`.
 
 Gauge: the first keyframe's pose is held at the filter's (the filter's world is the first
@@ -22,7 +25,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any, Optional, Sequence, Union
+from typing import Optional, Sequence, Union
 
 import numpy as np
 import scipy.linalg
@@ -31,11 +34,10 @@ import scipy.sparse.linalg
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from .._core import SogBank, SogUpdateReport
-from ..errors import InputError
-from .rolling_shutter import MAX_GAP_FRAMES
+from rscalib.errors import InputError
+from rscalib.selfcalib.rolling_shutter import MAX_GAP_FRAMES
 
-__all__ = ["BundleProblem", "BundleResult", "FeatureTracks", "TrackRecorder", "build_problem", "bundle_adjust", "project_civera",
+__all__ = ["BundleProblem", "BundleResult", "FeatureTracks", "build_problem", "bundle_adjust", "project_civera",
            "residuals_and_jacobian"]
 
 _Z99 = 2.5758293035489004
@@ -67,81 +69,6 @@ class FeatureTracks:
 
     def __len__(self) -> int:
         return len(self.frame)
-
-
-class TrackRecorder:
-    """A measurement source around ``source`` that records what the bank used. Pass it to
-    ``run_bank`` as the source and its :meth:`on_frame` as ``on_frame``; then :meth:`tracks`.
-    timed: the frames are ``rolling_shutter.TimedFrame`` (their times are recorded, for the line
-    delay); ``unwrap``: hand ``source`` the bare image (a source that does not take timed frames)."""
-
-    def __init__(self, source: Any, timed: bool = False, unwrap: bool = False) -> None:
-        self.source = source
-        self._timed = bool(timed or unwrap)
-        self._unwrap = bool(unwrap)
-        self._t_frame: Optional[float] = None
-        self._t_s: dict = {}
-        self._last: tuple[np.ndarray, np.ndarray] = (np.zeros(0, np.int64), np.zeros((0, 2)))
-        self._new: list[tuple[np.ndarray, np.ndarray]] = []
-        self._rows: list[tuple[int, np.ndarray, np.ndarray]] = []
-        self._R_cw: dict = {}
-        self._p_cw: dict = {}
-        self._points: dict = {}
-
-    @property
-    def options(self) -> Any:
-        return self.source.options
-
-    def _frame(self, frame: Any) -> Any:
-        if not self._timed:
-            return frame
-        self._t_frame = float(frame.t_s)
-        return frame.image if self._unwrap else frame
-
-    def measure(self, frame: Any, ids: np.ndarray, uv_pred: np.ndarray, cov: np.ndarray):
-        uv, found = self.source.measure(self._frame(frame), ids, uv_pred, cov)
-        self._last = (np.asarray(ids, np.int64).copy(), np.asarray(uv, float).copy())
-        return uv, found
-
-    def forget(self, feature_ids: np.ndarray) -> None:
-        self.source.forget(feature_ids)
-
-    def new_features(self, frame: Any, count: int, search: Any) -> np.ndarray:
-        return self.source.new_features(self._frame(frame), count, search)
-
-    def track(self, frame: Any, feature_ids: np.ndarray, uv: np.ndarray) -> None:
-        self.source.track(self._frame(frame), feature_ids, uv)
-        self._new.append((np.asarray(feature_ids, np.int64).copy(), np.asarray(uv, float).copy()))
-
-    def on_frame(self, k: int, bank: SogBank, report: SogUpdateReport) -> None:
-        ids, uv = self._last
-        used = np.asarray(report.used, bool)
-        self._rows.append((k, ids[used], uv[used]))
-        for new_ids, new_uv in self._new:     # a new feature's first pixel is a measurement too
-            self._rows.append((k, new_ids, new_uv))
-        self._new = []
-        self._last = (np.zeros(0, np.int64), np.zeros((0, 2)))
-        if self._t_frame is not None:
-            self._t_s[k] = self._t_frame
-        state = np.asarray(bank.camera_state, float)
-        R_wc = Rotation.from_quat(np.roll(state[3:7], -1)).as_matrix()   # stored w first
-        self._R_cw[k] = R_wc.T
-        self._p_cw[k] = -R_wc.T @ state[:3]
-        for fid, point in zip(np.asarray(bank.feature_ids), np.asarray(bank.feature_points())):
-            self._points[int(fid)] = point.copy()
-
-    def tracks(self) -> FeatureTracks:
-        frames = [np.full(len(ids), k, np.int64) for k, ids, _ in self._rows]
-        return FeatureTracks(
-            frame=np.concatenate(frames) if frames else np.zeros(0, np.int64),
-            feature_id=np.concatenate([ids for _, ids, _ in self._rows]) if frames else np.zeros(0, np.int64),
-            uv=np.concatenate([uv for _, _, uv in self._rows]).reshape(-1, 2) if frames else np.zeros((0, 2)),
-            R_cw=dict(self._R_cw), p_cw=dict(self._p_cw), points=dict(self._points),
-            t_s=dict(self._t_s) if self._timed else None)
-
-
-# --------------------------------------------------------------------------------------------------
-# The civera-radial projection with its Jacobians (docs/sog.md §5, vectorised)
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
