@@ -1,5 +1,5 @@
 """Determinism (issue 14): the same input and options give bit-identical result.json numbers across
-runs, across `--workers 1` and `--workers 2` (linedelay's detection processes), and across the
+runs, across `--workers 1` and `--workers 2` (linedelay's and intrinsics' detection processes), and across the
 self-calibration bank's thread count. Inputs are small `rscalib simulate` renders; detection runs
 with --no-cache so the second run recomputes. Only wall times and provenance (when, which command
 line) may differ; every other leaf of result.json, numbers and texts, must be equal (floats with ==:
@@ -56,6 +56,9 @@ def renders(tmp_path_factory):
     run("simulate", "--led", "--flicker-hz", "100", "--out", root / "led", "--frames", "12", "--seed", "5", "--quiet",
         ok=(0,))
     run("simulate", "--scene", "--out", root / "scene", "--duration", "1.5", "--seed", "5", "--quiet", ok=(0,))
+    run("simulate", "--out", root / "stills", "--line-delay", "0", "--duration", "2", "--fps", "5", "--supersample",
+        "1", "--frames-dir", "--no-video", "--size", "320x240", "--seed", "5", "--quiet", ok=(0,))
+    (root / "stills" / "frames" / "timestamps.txt").unlink()
     return root
 
 
@@ -65,6 +68,14 @@ def test_linedelay_identical_across_runs_and_worker_counts(renders, tmp_path):
         run("linedelay", video / "video.avi", "--target", video / "target.yaml", "--camera", video / "camera.yaml",
             "--out", tmp_path / f"w{workers}", "--workers", workers, "--no-cache", "--quiet")
     assert_identical(tmp_path / "w1", tmp_path / "w2", "line_delay_s")
+
+
+def test_intrinsics_identical_across_worker_counts(renders, tmp_path):
+    stills = renders / "stills"
+    for workers in (1, 2):
+        run("intrinsics", stills / "frames", "--target", stills / "target.yaml", "--out", tmp_path / f"w{workers}",
+            "--workers", workers, "--no-cache", "--quiet", ok=(0, 3, 4))
+    assert_identical(tmp_path / "w1", tmp_path / "w2", "parameters.fx")
 
 
 def test_flicker_identical_across_runs(renders, tmp_path):

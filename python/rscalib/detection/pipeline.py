@@ -286,6 +286,10 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
     pool = _start_pool(workers, target, options) if workers > 1 else None
     detector = RunDetector(Detector(target, options), run_frames) if pool is None else None
     plan = segment_plan(estimate, workers, run_frames) if frames.kind == "video" else None
+    # OpenCV's own threads, as in a worker (_worker_init): its detectors' sums run in another order on
+    # another thread count, and the corners would differ in the last bits between --workers 1 and 2
+    cv_threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
     try:
         with Progress(progress, estimate, f"detecting {target.target_type}") as bar:
             collected = _detect_segments(frames, plan, pool, run_frames, workers, bar) if plan else None
@@ -297,6 +301,7 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
             pool = None
         raise
     finally:
+        cv2.setNumThreads(cv_threads)
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
     return collected.result(frames, target)

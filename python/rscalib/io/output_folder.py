@@ -3,9 +3,8 @@
 - check_output_folder: --out must be a folder rscalib can create or write in, on a real file
   system (not /proc, /sys, /dev), with room for the expected outputs, and not an input folder;
   otherwise InputError (exit 2) before detection or solving starts. Given the command, the folder
-  is also its own: one that holds another command's results is refused unless forced (their
-  files would mix, and a re-run would remove the other's), and the folder is marked as the
-  command's (`.rscalib-command.json`).
+  must also be its own: one that holds another command's results (its result.json's provenance, a
+  batch store, a simulation's truth.json) is refused unless forced: their files would mix.
 - output_set: a writer writes into a hidden staging folder inside the output folder; on success the
   set is committed: the plan (which files move in, which of the previous run's files go) is written
   to `.rscalib-commit.json`, then carried out with result.json last, so a folder with a result.json
@@ -44,11 +43,10 @@ from . import _commit as commit_steps
 from ._commit import JOURNAL, LOCK, MANIFEST, STAGING_PREFIX, plain_names, read_journal, remove, roll_forward
 from .results import RESULT_FILE  # the marker of a complete set
 
-__all__ = ["JOURNAL", "LOCK", "MANIFEST", "OWNER", "STAGING_PREFIX", "check_output_folder", "expected_output_bytes",
+__all__ = ["JOURNAL", "LOCK", "MANIFEST", "STAGING_PREFIX", "check_output_folder", "expected_output_bytes",
            "folder_owner", "input_bytes", "output_set", "recover_output_folder", "remove_output_set"]
 
-# which command writes into the folder (`{"command": "linedelay"}`), marked when a command claims it
-OWNER = ".rscalib-command.json"
+# which command wrote the folder: what its files say (folder_owner); nothing is added to mark it
 
 MB = 1 << 20
 
@@ -84,23 +82,17 @@ def _existing_ancestor(path: Path) -> Path:
 
 
 def folder_owner(out) -> Optional[str]:
-    """The command whose results `out` holds: its mark (OWNER), else what its files say (a
-    result.json's provenance, a batch store, a simulation's truth.json); None for a folder without
-    rscalib results."""
+    """The command whose results `out` holds, from its files: a result.json's provenance, a batch
+    store, a simulation's truth.json; None for a folder without rscalib results."""
     out = Path(out)
-    for name, read in ((OWNER, lambda d: d.get("command")),
-                       (RESULT_FILE, lambda d: (d.get("provenance") or {}).get("command"))):
-        try:
-            data = json.loads((out / name).read_text()) if (out / name).is_file() else None
-        except (OSError, ValueError):
-            data = None
-        if isinstance(data, dict):
-            try:
-                command = read(data)
-            except AttributeError:
-                command = None
-            if isinstance(command, str) and command:
-                return command
+    try:
+        data = json.loads((out / RESULT_FILE).read_text()) if (out / RESULT_FILE).is_file() else None
+    except (OSError, ValueError):
+        data = None
+    provenance = data.get("provenance") if isinstance(data, dict) else None
+    command = provenance.get("command") if isinstance(provenance, dict) else None
+    if isinstance(command, str) and command:
+        return command
     if (out / "results.sqlite").is_file():
         return "batch"
     if (out / "truth.json").is_file():
@@ -113,9 +105,8 @@ def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out",
     """InputError (one line naming the path and the reason) unless `out` is, or can be created as,
     a writable folder with `needed_bytes` free, and is none of the `inputs` (an image folder given
     as --out would get the outputs among its frames). With `command`: InputError when the folder
-    holds another command's results (unless `force`), else the folder is created and marked as the
-    command's. It finishes a commit a killed run left half done (recover_output_folder); returns
-    the path."""
+    holds another command's results (unless `force`). Creates nothing (it finishes a commit a killed
+    run left half done: recover_output_folder); returns the path."""
     if str(out).strip() == "":
         raise InputError(f"{option} is empty: give an output folder")
     out = Path(out)
@@ -152,23 +143,16 @@ def check_output_folder(out, needed_bytes: int = 16 * MB, option: str = "--out",
     if (resolved / JOURNAL).exists():
         recover_output_folder(resolved)
     if command is not None:
-        _claim(out, resolved, command, force, option)
+        _check_owner(out, resolved, command, force, option)
     return out
 
 
-def _claim(out: Path, resolved: Path, command: str, force: bool, option: str) -> None:
+def _check_owner(out: Path, resolved: Path, command: str, force: bool, option: str) -> None:
     owner = folder_owner(resolved) if resolved.is_dir() else None
     if owner is not None and owner != command and not force:
         raise InputError(f"{option} {out}: holds the results of `rscalib {owner}`; give `rscalib {command}` a folder "
                          f"of its own, or --force to write into it anyway (the files of `rscalib {owner}` that "
                          f"`rscalib {command}` also writes are replaced)")
-    if owner == command and (resolved / OWNER).is_file():
-        return
-    try:
-        resolved.mkdir(parents=True, exist_ok=True)
-        (resolved / OWNER).write_text(json.dumps({"command": command}) + "\n")
-    except OSError as error:
-        raise InputError(f"{option} {out}: cannot write in it ({error.strerror})") from None
 
 
 def input_bytes(paths) -> int:

@@ -7,8 +7,10 @@ import textwrap
 import pytest
 
 from rscalib.batch.manifest import load_manifest
-from rscalib.cli import main
+from rscalib.cli import build_parser, main
 from rscalib.errors import InputError
+
+PARSE = build_parser().parse_args   # the rows are checked with the commands' own parser (as `rscalib batch`)
 
 
 def write(tmp_path, name: str, text: str):
@@ -23,7 +25,7 @@ def test_csv_rows_become_the_single_commands_with_paths_from_the_manifest_folder
         a,linedelay,videos/a.avi,1080p30,board.yaml,cam.yaml,,true
         ,flicker,led/clip.mp4,,,,1000,
         """)
-    a, b = load_manifest(manifest)
+    a, b = load_manifest(manifest, PARSE)
     assert a.id == "a" and a.mode == "1080p30" and a.row == 1
     assert a.argv == ("linedelay", str(tmp_path / "videos/a.avi"), "--target", str(tmp_path / "board.yaml"),
                       "--camera", str(tmp_path / "cam.yaml"), "--no-self-check", "--workers", "1", "--quiet")
@@ -42,7 +44,7 @@ def test_yaml_with_defaults_lists_and_flags(tmp_path):
           - {id: stills, command: intrinsics, input: [s1, s2], max_views: 30}
           - {command: selfcalib, input: room, f-range: [100, 600], no-restarts: true, target: null}
         """)
-    stills, walk = load_manifest(manifest)
+    stills, walk = load_manifest(manifest, PARSE)
     assert stills.argv == ("intrinsics", str(tmp_path / "s1"), str(tmp_path / "s2"), "--target",
                            str(tmp_path / "board.yaml"), "--max-views", "30", "--workers", "1", "--quiet")
     assert walk.argv == ("selfcalib", str(tmp_path / "room"), "--f-range", "100", "600", "--no-restarts", "--quiet")
@@ -66,19 +68,19 @@ def test_a_bad_row_names_the_file_row_and_field(tmp_path, rows, expected):
     manifest = tmp_path / "m.csv"
     manifest.write_text(rows)
     with pytest.raises(InputError) as error:
-        load_manifest(manifest)
+        load_manifest(manifest, PARSE)
     assert str(error.value).startswith(f"{manifest}: ") and expected in str(error.value), str(error.value)
 
 
 def test_yaml_problems_and_other_files(tmp_path):
     with pytest.raises(InputError, match=r"m.yaml: row 2: a job is a mapping"):
-        load_manifest(write(tmp_path, "m.yaml", "- {command: flicker, input: a, frequency: 1}\n- flicker\n"))
+        load_manifest(write(tmp_path, "m.yaml", "- {command: flicker, input: a, frequency: 1}\n- flicker\n"), PARSE)
     with pytest.raises(InputError, match="not valid YAML"):
-        load_manifest(write(tmp_path, "n.yaml", "jobs: [\n"))
+        load_manifest(write(tmp_path, "n.yaml", "jobs: [\n"), PARSE)
     with pytest.raises(InputError, match="a .csv or .yaml file"):
-        load_manifest(write(tmp_path, "m.txt", "x"))
+        load_manifest(write(tmp_path, "m.txt", "x"), PARSE)
     with pytest.raises(InputError, match="manifest not found"):
-        load_manifest(tmp_path / "none.csv")
+        load_manifest(tmp_path / "none.csv", PARSE)
 
 
 def test_the_command_line_says_one_line_and_exits_2(tmp_path, capsys):

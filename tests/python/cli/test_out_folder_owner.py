@@ -9,26 +9,30 @@ import sys
 import pytest
 
 from rscalib.errors import InputError
-from rscalib.io.output_folder import OWNER, check_output_folder, folder_owner
+from rscalib.io.output_folder import check_output_folder, folder_owner
 
 CLI = [sys.executable, "-m", "rscalib.cli"]
 
 
-def test_a_folder_is_marked_and_kept_for_its_command(tmp_path):
+def _result_of(folder, command):
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "result.json").write_text(json.dumps({"provenance": {"command": command}}))
+
+
+def test_a_folder_belongs_to_the_command_of_its_results(tmp_path):
     out = tmp_path / "out"
-    check_output_folder(out, command="linedelay")
-    assert folder_owner(out) == "linedelay"
-    assert json.loads((out / OWNER).read_text()) == {"command": "linedelay"}
+    check_output_folder(out, command="linedelay")                 # a new folder: anyone's, nothing created
+    assert not out.exists()
+    _result_of(out, "linedelay")
     check_output_folder(out, command="linedelay")                 # a re-run: its own folder
     with pytest.raises(InputError, match=r"holds the results of `rscalib linedelay`.*--force"):
         check_output_folder(out, command="selfcalib")
-    assert folder_owner(out) == "linedelay"                       # refused: nothing changed
+    assert sorted(p.name for p in out.iterdir()) == ["result.json"]   # refused: nothing changed
     check_output_folder(out, command="selfcalib", force=True)
-    assert folder_owner(out) == "selfcalib"
 
 
 @pytest.mark.parametrize("name, content, owner", [
-    ("result.json", {"provenance": {"command": "flicker"}}, "flicker"),   # a folder from before the mark
+    ("result.json", {"provenance": {"command": "flicker"}}, "flicker"),
     ("truth.json", {"line_delay_s": 3e-5}, "simulate"),
     ("result.json", ["not", "a", "result"], None),
 ])
@@ -40,7 +44,7 @@ def test_the_owner_of_a_folder_without_a_mark(tmp_path, name, content, owner):
 def test_a_folder_of_other_files_is_anyones(tmp_path):
     (tmp_path / "notes.txt").write_text("mine")
     check_output_folder(tmp_path, command="intrinsics")
-    assert folder_owner(tmp_path) == "intrinsics" and (tmp_path / "notes.txt").read_text() == "mine"
+    assert folder_owner(tmp_path) is None and (tmp_path / "notes.txt").read_text() == "mine"
 
 
 def _simulate_led(out):

@@ -308,8 +308,11 @@ def test_linedelay_out_into_the_folder_of_its_camera_keeps_the_camera(tmp_path):
         (staged / "report.html").write_text("intrinsics report")
         write_result_json(staged, {"marker": "intrinsics"}, command="intrinsics")
     camera = (calib / "camera.yaml").read_bytes()
-    done = rscalib("linedelay", sim / "video.avi", "--target", sim / "target.yaml", "--camera", calib / "camera.yaml",
-                   "--out", calib, "--no-report", "--workers", "1", "--quiet")
+    argv = ["linedelay", sim / "video.avi", "--target", sim / "target.yaml", "--camera", calib / "camera.yaml",
+            "--out", calib, "--no-report", "--workers", "1", "--quiet"]
+    refused = rscalib(*argv)     # intrinsics' folder: another command's (issue 32)
+    assert refused.returncode == 2 and "--force" in refused.stderr, refused.stderr
+    done = rscalib(*argv, "--force")
     assert done.returncode in (0, 3, 4), done.stderr
     assert (calib / "camera.yaml").read_bytes() == camera
     assert (calib / "camera_with_line_delay.yaml").is_file() and not (calib / "report.html").exists()

@@ -21,9 +21,12 @@ import yaml
 
 from rscalib._core import CameraModel
 from rscalib.batch.manifest import load_manifest
+from rscalib.cli import build_parser
 from rscalib.errors import InputError
 from rscalib.io.cameras import load_camera, write_camera
 from rscalib.io.targets import load_target
+
+PARSE = build_parser().parse_args   # the rows are checked with the commands' own parser (as `rscalib batch`)
 
 CAMERA = CameraModel("pinhole-radtan", [500.0, 501.0, 319.5, 239.5, -0.1, 0.05, 0.001, -0.002, 0.0], 640, 480)
 KALIBR = {"cam0": {"camera_model": "pinhole", "intrinsics": [500.0, 501.0, 319.5, 239.5],
@@ -130,7 +133,7 @@ def test_aliases_a_manifest_may_use_are_read(tmp_path):
     path = tmp_path / "jobs.yaml"
     path.write_text("common: &board {command: linedelay, target: board.yaml, camera: cam.yaml}\n"
                     "jobs:\n  - {<<: *board, input: a.avi, id: a}\n  - {<<: *board, input: b.avi, id: b}\n")
-    a, b = load_manifest(path)
+    a, b = load_manifest(path, PARSE)
     assert a.argv[:4] == ("linedelay", str(tmp_path / "a.avi"), "--target", str(tmp_path / "board.yaml"))
     assert b.id == "b"
     from rscalib.io.safe_parse import load_yaml
@@ -214,7 +217,7 @@ def test_a_5000_digit_integer_in_a_csv_manifest_is_refused_by_the_option(tmp_pat
     path = tmp_path / "jobs.csv"
     path.write_text(f"command,input,frequency\nflicker,a.avi,{BIG}\n")
     with pytest.raises(InputError, match="field 'frequency'") as error:
-        load_manifest(path)
+        load_manifest(path, PARSE)
     assert "4300" not in str(error.value)
 
 
