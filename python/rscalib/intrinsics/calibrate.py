@@ -8,6 +8,7 @@ standard deviations of the parameters.
 """
 from __future__ import annotations
 
+import contextlib
 import re
 from dataclasses import dataclass, field
 from typing import Optional
@@ -234,6 +235,24 @@ def calibrate_detections(detections: DetectionResult, options: Optional[Intrinsi
     object_points = [obs.target_points[obs.point_id[slices[v]]].astype(np.float64) for v in views]
     image_points = [obs.uv[slices[v]].astype(np.float64) for v in views]
     size = obs.image_size
+    with _one_opencv_thread():
+        return _solve(detections, views, object_points, image_points, size, model, warnings)
+
+
+@contextlib.contextmanager
+def _one_opencv_thread():
+    """OpenCV's solvers on one thread: on two, calibrateCamera's sums run in another order from run to
+    run and the last bits of the camera change (measured: fx 249.17631971723708 vs ...13547)."""
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(threads)
+
+
+def _solve(detections, views, object_points, image_points, size, model, warnings) -> IntrinsicsResult:
+    """The fit of calibrate_detections on the chosen views (OpenCV on one thread: _one_opencv_thread)."""
     if model == "pinhole-radtan":
         reach = radial_reach(detections, views)
         fit_k3 = reach >= K3_MIN_RADIUS
@@ -264,7 +283,7 @@ def calibrate_detections(detections: DetectionResult, options: Optional[Intrinsi
         view_frames=detections.frame_numbers[views], view_labels=[detections.frame_labels[v] for v in views],
         view_rms_px=view_rms, view_points=np.array([len(i) for i in image_points]),
         rvecs=np.array([np.ravel(r) for r in rvecs]), tvecs=np.array([np.ravel(t) for t in tvecs]),
-        views_available=obs.num_frames, warnings=warnings)
+        views_available=detections.observations.num_frames, warnings=warnings)
 
 
 def _select_from(detections: DetectionResult, frames: np.ndarray, max_views: int) -> np.ndarray:

@@ -243,7 +243,9 @@ def _adjust(tracks: TrackSet, states: list, camera0: CameraModel, options: SelfC
                     adjustment_tracks=int(len(np.unique(observations.track_id))),
                     adjustment_observations=int(len(observations)))
         poses = FilterPoses.from_states(states)
-        solve = dict(loss="soft_l1", loss_scale_px=options.robust_loss_scale_px, **line_delay)
+        # one thread a solve: Ceres' threads sum the Schur complement in an order that changes from run to
+        # run (the last bits of f differed between two runs); the halves run side by side instead
+        solve = dict(loss="soft_l1", loss_scale_px=options.robust_loss_scale_px, num_threads=1, **line_delay)
         # First the tracks seen longest alone (a tenth of the cost an iteration): from the filter's
         # camera and poses, which can be far off, most iterations are spent here; the whole set then
         # starts from their answer and converges in a few.
@@ -280,16 +282,24 @@ def _halves_check(observations, poses: FilterPoses, whole: AdjustmentResult, sol
     delay's self-check: docs/formulation.md §9). Every parameter is widened by the largest z: a misfit
     seen in one parameter reaches the others through their correlations, in shares the check cannot
     tell (docs/sog.md §24). None when a half cannot be adjusted."""
+    from concurrent.futures import ThreadPoolExecutor
+
     camera = whole.camera
-    estimates, sigmas = [], []
-    for part in halves(observations, MIN_TRACK_KEYFRAMES):
-        if len(part) == 0:
-            return None
+    parts = halves(observations, MIN_TRACK_KEYFRAMES)
+    if any(len(part) == 0 for part in parts):
+        return None
+
+    def adjusted(part) -> Optional[AdjustmentResult]:
         try:
-            half = adjust(adjustment_start(part, poses, camera), camera, **solve)
+            return adjust(adjustment_start(part, poses, camera), camera, **solve)
         except (ValueError, np.linalg.LinAlgError):
             return None
-        if not (half.converged and half.covariance_ok):
+
+    with ThreadPoolExecutor(len(parts)) as pool:   # the solver releases the GIL: one core each
+        results = list(pool.map(adjusted, parts))
+    estimates, sigmas = [], []
+    for half in results:
+        if half is None or not (half.converged and half.covariance_ok):
             return None
         estimates.append(np.asarray(half.estimate, float))
         sigmas.append(np.sqrt(np.maximum(np.diag(half.covariance_two_way), 0.0)))

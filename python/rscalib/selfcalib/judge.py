@@ -38,6 +38,8 @@ MIN_BUNDLE_POINTS = 30
 # third to all of it): a line delay whose 99 % interval lies wholly beyond this many frame intervals per
 # image is the model misfitting the data, not a shutter (docs/sog.md §21).
 MAX_READOUT_FRAMES = 1.25
+# an f interval wider than +-50 %: the data constrain nothing (a camera that did not move)
+UNCONSTRAINED_HALF_WIDTH = 0.5
 def prior_bounds(initial, image_size: tuple[int, int]) -> np.ndarray:
     """What is known without the data (5, 2): the 99 % range of the initial mixture per parameter,
     the principal point's widened to UNDETERMINED_PP_HALF_WIDTH of the image diagonal."""
@@ -91,6 +93,16 @@ def _impossible_readout(adj: AdjustmentResult, image_height: int, frame_interval
     return least * image_height > MAX_READOUT_FRAMES * frame_interval_s
 
 
+def _within_prior(reported: np.ndarray, prior_bounds: np.ndarray) -> np.ndarray:
+    """The data's 99 % bounds cut to the prior's box (no camera outside it was ever possible: an f
+    interval reaching below 0 says the data add nothing there); the prior's bounds of a parameter
+    whose data interval misses the box."""
+    lo = np.maximum(reported[:, 0], prior_bounds[:, 0])
+    hi = np.minimum(reported[:, 1], prior_bounds[:, 1])
+    empty = ~(lo <= hi)
+    return np.where(empty[:, None], prior_bounds, np.c_[lo, hi])
+
+
 def judge_adjustment(adj: Optional[AdjustmentResult], error: str, prior_bounds: np.ndarray, max_f_half_width: float,
                      image_height: int, frame_interval_s: Optional[float] = None) -> tuple[bool, str, np.ndarray]:
     """(determined, reason, bounds to report) from the bundle adjustment (docs/sog.md §24).
@@ -130,8 +142,10 @@ def judge_adjustment(adj: Optional[AdjustmentResult], error: str, prior_bounds: 
     if problem:
         return False, problem, prior_bounds.copy()
     if not half <= max_f_half_width:
+        why = ("the camera hardly moved, or moved without turning?" if half > UNCONSTRAINED_HALF_WIDTH
+               else "little rotation, or a mostly sideways motion?")
         return False, (f"the data pin f only to +-{100 * half:.1f} % ({spread}; determined needs "
-                       f"+-{100 * max_f_half_width:g} %): little rotation, or a mostly sideways motion?"), reported
+                       f"+-{100 * max_f_half_width:g} %): {why}"), _within_prior(reported, prior_bounds)
     return True, (f"bundle adjustment over {points} tracks and {len(adj.keyframe_poses)} keyframes: {spread}, "
                   f"residual {adj.sigma_px:.2f} px"), reported
 

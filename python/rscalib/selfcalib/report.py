@@ -108,6 +108,13 @@ def _how_html(result: SelfCalibResult) -> str:
     if adj is not None:
         rows += [("residual (robust sigma)", f"{adj.sigma_px:.3f} px"),
                  ("solver", f"{adj.termination.lower()}, {adj.iterations} iterations, {adj.solve_time_s:.1f} s")]
+    check = result.self_check
+    if check:
+        z = dict(zip(check["names"], check["z"]))
+        said = ", ".join(f"{name} {z[name]:.1f} σ" for name in sorted(z, key=z.get, reverse=True)[:3])
+        rows.append(("self-check: the two halves of the video adjusted apart",
+                     f"they differ by {said}; every σ widened ×{check['widen'][0]:.2f}"
+                     if check["widen"][0] > 1 else f"they agree ({said})"))
     if result.filter_mean is not None:
         fm = result.filter_mean
         rows.append(("the filter alone (Civera et al. 2009)", f"f {fm[0]:.1f} px, c ({fm[1]:.1f}, {fm[2]:.1f}); "

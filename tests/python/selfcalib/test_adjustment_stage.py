@@ -193,6 +193,13 @@ def test_judge_adjustment_a_possible_readout_is_no_problem():
     assert judge_adjustment(adj, "", PRIOR, 0.02, HEIGHT, 1 / 30)[0]
 
 
+def test_judge_adjustment_cuts_what_the_data_allow_to_the_prior():
+    determined, reason, bounds = judge_adjustment(_adjustment(f_half=300.0), "", PRIOR, 0.02, HEIGHT, 1 / 30)
+    assert not determined and "hardly moved" in reason
+    np.testing.assert_allclose(bounds[0], [PRIOR[0, 0], PRIOR[0, 1]])     # [-100, 500] cut to [100, 400]
+    np.testing.assert_allclose(bounds[1], [159.0, 161.0])                 # inside the box: the data's
+
+
 def test_judge_adjustment_without_an_adjustment():
     determined, reason, bounds = judge_adjustment(None, "no track spans 3 keyframes", PRIOR, 0.02, HEIGHT)
     assert not determined and "no track spans" in reason
