@@ -7,6 +7,8 @@ packages=(g++ make libceres-dev libeigen3-dev libsuitesparse-dev libgtest-dev cl
 # The real consumers of our exported camera files, for the tests (docs/formats.md): mrcal (PyPI has no
 # wheel for it) and ROS's camera_info parser. They install for the system Python; the tests call it.
 packages+=(python3-mrcal python3-camera-calibration-parsers)
+# A real browser for the report tests (tests/python/test_report_browser.py opens report.html headless).
+packages+=(chromium)
 python3 -c "import venv, ensurepip" 2>/dev/null || packages+=(python3-venv)
 command -v python3 >/dev/null || packages+=(python3 python3-dev python3-venv)
 

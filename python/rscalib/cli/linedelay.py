@@ -28,8 +28,9 @@ from .intrinsics import add_lens_profile_options, lens_profile_names
 # `rscalib linedelay` exit codes (README: exit codes): 0 trusted, 2 bad input, 3 undetermined, and
 EXIT_CODES_HELP = ("exit codes: 0 the line delay is estimated and every check passed (trust it); "
                    "2 bad input (one line on stderr); 3 the video does not determine the line delay (results "
-                   "written, no number claimed); 4 estimated but not trusted: a check failed (J/2N, the halves' "
-                   "self-check, coverage, uncertainty; the report says which and what to film differently); "
+                   "written, no number claimed); 4 estimated but not trusted: a check failed (physical limits, "
+                   "J/2N above 1.5, the halves' self-check, coverage, uncertainty; the first suspect is named "
+                   "first, and the report says what to film differently); "
                    "1 internal error")
 
 # Equal segments at most: each adds 6 unknowns and a band of the Jacobian (more than a few per frame
@@ -252,8 +253,10 @@ def _print_result(run, summary: dict) -> None:
         print(f"line delay {result.line_delay_s * 1e6:.4f} +- {std * 1e6:.4f} us/row, readout "
               f"{result.readout_time_s * 1e3:.4f} ms{rows_note}; J/2N {result.normalised_cost:.3f}"
               + (" " if run.model == "linear" else "; ") + said)
-        for reason in verdict.reasons:
-            print(f"  because: {in_flags(reason)}")
+        for number, reason in enumerate(verdict.reasons):
+            print(f"  {'first suspect' if number == 0 and len(verdict.reasons) > 1 else 'because'}: {in_flags(reason)}")
+        for caveat in verdict.caveats:
+            print(f"  note: {in_flags(caveat)}")
     refined = summary.get("intrinsics")
     if refined:
         print("intrinsics refined: " + ", ".join(

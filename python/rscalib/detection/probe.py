@@ -5,6 +5,9 @@ OpenCV's chessboard finder also accepts a smaller grid inside a larger board in 
 time at a different place: a 4x3 (5x4, 4x6, 5x5) target file for a 9x6 board then "detects", and
 the line delay fits nonsense. So after detection a few frames are searched for the whole board
 they show (findChessboardCornersSB grown from a 3x3 start, CALIB_CB_LARGER).
+
+Before detection, :func:`early_board` looks at a few frames of the video's first seconds, so a target
+file that does not match fails in seconds rather than after the whole detection (issue 31).
 """
 from __future__ import annotations
 
@@ -57,6 +60,31 @@ def board_size(gray: np.ndarray) -> Optional[tuple[int, int]]:
     return max(meta.shape), min(meta.shape)
 
 
+def whole_board_size(gray: np.ndarray) -> Optional[tuple[int, int]]:
+    """board_size of a board seen whole: its outer corners at least two squares from the image's border
+    (a board cut by the border shows fewer corners than it has), else None."""
+    small = _small(gray)
+    try:
+        ok, corners, meta = cv2.findChessboardCornersSBWithMeta(small, _START_SIZE, _SB_FLAGS)
+    except cv2.error:
+        return None
+    if not ok or meta is None or meta.ndim != 2 or corners is None or len(corners) < 4:
+        return None
+    uv = corners.reshape(-1, 2)
+    rows, cols = meta.shape
+    grid = uv.reshape(rows, cols, 2) if rows * cols == len(uv) else None
+    if grid is None:
+        return None
+    step = float(np.median(np.concatenate([np.linalg.norm(np.diff(grid, axis=0), axis=2).ravel(),
+                                           np.linalg.norm(np.diff(grid, axis=1), axis=2).ravel()])))
+    h, w = small.shape[:2]
+    margin = 2.0 * step
+    if uv[:, 0].min() < margin or uv[:, 1].min() < margin or uv[:, 0].max() > w - 1 - margin \
+            or uv[:, 1].max() > h - 1 - margin:
+        return None
+    return max(meta.shape), min(meta.shape)
+
+
 def larger_board_visible(frames: Sequence[np.ndarray], cols: int, rows: int) -> bool:
     """True when some frame shows a checkerboard with more inner corners than cols x rows."""
     for image in frames:
@@ -77,6 +105,30 @@ def largest_board(frames: Sequence[np.ndarray]) -> Optional[tuple[int, int]]:
     if not votes:
         return None
     return max(votes.items(), key=lambda kv: (kv[1], kv[0][0] * kv[0][1]))[0]
+
+
+# early_board: frames sampled from the start of the video, every EARLY_STEP-th, at most EARLY_FRAMES;
+# a board size seen in EARLY_AGREE of them settles the question
+EARLY_FRAMES, EARLY_STEP, EARLY_AGREE = 6, 10, 2
+
+
+def early_board(source: Union[str, Path, Sequence], frames: int = EARLY_FRAMES, step: int = EARLY_STEP,
+                agree: int = EARLY_AGREE) -> Optional[tuple[int, int]]:
+    """(cols, rows) of the checkerboard seen whole (whole_board_size) in `agree` of the frames 0, step,
+    2 step, ... (at most `frames` of them, from the video's start: decoding stops at the last), or None
+    when no size is seen that often. Stops as soon as one size is seen `agree` times."""
+    votes: dict = {}
+    wanted = set(range(0, frames * step, step))
+    for frame in open_source(source).frames(gray=True):
+        if frame.index in wanted and frame.image is not None:
+            seen = whole_board_size(frame.image)
+            if seen is not None:
+                votes[seen] = votes.get(seen, 0) + 1
+                if votes[seen] >= agree:
+                    return seen
+        if frame.index >= max(wanted):
+            break
+    return None
 
 
 def mismatch_message(target: Target, seen: Optional[tuple[int, int]]) -> str:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import html
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Optional, Union
 
@@ -132,6 +133,10 @@ def _save(fig, path: Path) -> Path:
 
 def plot_residuals_time(result: Estimate, path: Path) -> Path:
     plt = _pyplot()
+    if len(np.unique(result.observation_time_s)) < 2 and result.used_observations.num_frames < 2:
+        rms = np.sqrt(np.mean(result.residual_px ** 2, axis=0))
+        return _value_panel(path, "Residuals: one frame", [f"rms u {rms[0]:.3f} px, v {rms[1]:.3f} px over "
+                                                           f"{len(result.residual_px)} corners"])
     fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
     t = result.observation_time_s - _time_origin(result)
     for ax, k, name in ((axes[0], 0, "u"), (axes[1], 1, "v")):
@@ -208,29 +213,50 @@ def plot_covariance_ellipses(result: LineDelayResult, path: Path, count: int = 6
 
 
 def plot_knots_and_speed(result: LineDelayResult, path: Path) -> Path:
-    """Knot density against the image speed of the observations (the solver's image velocities)."""
+    """Knot density against the image speed of the observations (the solver's image velocities).
+    The spline's end knots repeat (zero-length spans): only the segments between distinct knots count."""
     plt = _pyplot()
     obs = result.used_observations
     speed = np.linalg.norm(result.image_velocity_px_s, axis=1)
     t0 = result.trajectory.t_begin
-    knots = result.knots - t0
+    knots = np.unique(np.asarray(result.knots, dtype=float)) - t0
     fig, ax = plt.subplots(figsize=(9, 3.8))
     widths = np.diff(knots)
-    ax.bar(knots[:-1], 1.0 / widths, width=widths, align="edge", alpha=0.45, label="knot density (1/s)")
-    ax.set_ylabel("knots per second")
+    keep = widths > 1e-9
+    ax.bar(knots[:-1][keep], 1.0 / widths[keep], width=widths[keep], align="edge", alpha=0.35, color="C0",
+           label="knot density (1/s)", zorder=1)
+    ax.set_ylabel("knots per second", color="C0")
     ax.set_xlabel("time (s)")
     ax2 = ax.twinx()
     frame_t = obs.frame_times_s[obs.frame_index] - t0
     frames = np.unique(frame_t)
-    mean_speed = np.array([np.median(speed[frame_t == f]) for f in frames])
-    ax2.plot(frames, mean_speed, color="C1", lw=1, label="image speed")
+    median_speed = np.array([np.nanmedian(speed[frame_t == f]) for f in frames])
+    ax2.plot(frames, median_speed, color="C1", lw=1.2, label="image speed", zorder=3)
     ax2.set_ylabel("median image speed (px/s)", color="C1")
-    ax.set_title("Knot density after adaptation, and image motion")
+    ax2.set_ylim(bottom=0)
+    ax.set_ylim(bottom=0)
+    ax.set_title("Knot density after adaptation (bars), and image motion (line)")
+    return _save(fig, path)
+
+
+def _value_panel(path: Path, title: str, lines: list) -> Path:
+    """A plot of a single value (one round, one frame): the value written out instead of empty axes."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 1.6))
+    ax.axis("off")
+    ax.text(0.0, 0.5, "\n".join(lines), va="center", ha="left", fontsize=11, transform=ax.transAxes)
+    ax.set_title(title, loc="left")
     return _save(fig, path)
 
 
 def plot_rounds(result: LineDelayResult, path: Path) -> Path:
     plt = _pyplot()
+    if len(result.history) < 2:
+        h = result.history[-1]
+        std = "" if not math.isfinite(h.line_delay_std_s) else f" ± {h.line_delay_std_s * 1e6:.4f}"
+        return _value_panel(path, "Line delay per round: one round (no knot was added)",
+                            [f"round {h.round}: {h.line_delay_s * 1e6:.4f}{std} µs/row, {h.segments} knot segments, "
+                             f"J/2N {h.normalised_cost:.3f}"])
     fig, ax = plt.subplots(figsize=(6, 3.6))
     rounds = [h.round for h in result.history]
     d = [h.line_delay_s * 1e6 for h in result.history]
@@ -243,6 +269,9 @@ def plot_rounds(result: LineDelayResult, path: Path) -> Path:
     for h in result.history:
         ax.annotate(f"{h.segments} seg.", (h.round, h.line_delay_s * 1e6), fontsize=7, xytext=(3, -10),
                     textcoords="offset points")
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("knot-adaptation round")
     ax.set_ylabel("line delay (µs/row)")
     ax.set_title("Line delay per round")
@@ -278,35 +307,58 @@ def plot_trajectory(result: Estimate, path: Path) -> Path:
     return _save(fig, path)
 
 
+@dataclass(frozen=True)
+class PlotJob:
+    """A plot of the report: its title, how to draw it, its file, the sentence on what to look for,
+    and whether it is for the expert (the report's appendix)."""
+
+    title: str
+    draw: Callable
+    name: str
+    look_for: str
+    expert: bool = False
+
+
 def _plot_jobs(result: Estimate, verdict: Verdict) -> list:
-    """The report's plots of a line-delay estimate, (caption, plot function, file name): residuals and
-    trajectory for both models; the spline's error ellipses, knot density and rounds besides (the linear
-    model has no knots, no rounds and, by default, unstandardised errors). A line delay that is not
-    determined is not drawn (the ellipses and the rounds show it)."""
-    jobs = [("residuals over time", plot_residuals_time, "residuals_time.png"),
-            ("residuals over the image and target coverage", plot_residuals_image, "residuals_image.png")]
+    """The report's plots of a line-delay estimate: residuals and trajectory for both models; the
+    spline's error ellipses, knot density and rounds besides, in the appendix (the linear model has no
+    knots, no rounds and, by default, unstandardised errors). A line delay that is not determined is not
+    drawn (the ellipses and the rounds show it)."""
+    jobs = [PlotJob("Residuals over time", plot_residuals_time, "residuals_time.png",
+                    "Look for points spread evenly between the dashed ±3σ lines all along the video; a burst "
+                    "or a drift marks a part of the video the model does not fit."),
+            PlotJob("Where the board was seen, and the residuals there", plot_residuals_image, "residuals_image.png",
+                    "Look for corners over the whole height of the image (the line delay is read along the "
+                    "rows) and no region with larger residuals (a wrong camera file shows at the edges).")]
+    jobs.append(PlotJob("Camera trajectory", plot_trajectory, "trajectory.png",
+                        "Look for smooth curves through the dots (each frame's own pose); curves that leave the "
+                        "dots mean the motion was too fast or too jerky to follow."))
     if isinstance(result, LineDelayResult) and verdict.claims:
-        jobs += [("how image motion stretches the detection noise (paper Fig. 2)", plot_covariance_ellipses,
-                  "covariance_ellipses.png"),
-                 ("knot density and image motion", plot_knots_and_speed, "knots_speed.png"),
-                 ("line delay per knot-adaptation round", plot_rounds, "rounds.png")]
-    jobs.append(("trajectory", plot_trajectory, "trajectory.png"))
+        jobs += [PlotJob("How image motion stretches the detection noise (paper Fig. 2)", plot_covariance_ellipses,
+                         "covariance_ellipses.png",
+                         "Look for red ellipses longer than the grey circles: the rolling shutter at work (the "
+                         "faster the image moves, the more a corner's row time blurs its position).", expert=True),
+                 PlotJob("Knot density and image motion", plot_knots_and_speed, "knots_speed.png",
+                         "Look for bars (knots of the trajectory per second) that rise where the line (image "
+                         "speed) rises: the trajectory takes more knots where the motion is fast.", expert=True),
+                 PlotJob("Line delay per knot-adaptation round", plot_rounds, "rounds.png",
+                         "Look for a line delay that settles over the rounds, the last ones well inside the "
+                         "final ±3σ bar.", expert=True)]
     return jobs
 
 
 def _plots(result: Estimate, verdict: Verdict, out: Path, failed: list) -> dict:
-    """The plots of _plot_jobs drawn into out, {caption: path}; the ones that fail are left out
-    and said in `failed`."""
+    """The plots of _plot_jobs drawn into out, {file name: (Figure, expert)}; the ones that fail are
+    left out and said in `failed`."""
     plt = _pyplot()
-    jobs = _plot_jobs(result, verdict)
     plots = {}
-    for caption, plot, name in jobs:
+    for job in _plot_jobs(result, verdict):
         # a plot of degenerate data (NaN, infinite sigma) must not cost the user the result
         try:
-            plots[caption] = plot(result, out / name)
+            plots[job.name] = (Figure(job.draw(result, out / job.name), job.title, job.look_for), job.expert)
         except Exception as error:  # noqa: BLE001
             plt.close("all")
-            failed.append(f"plot {name} skipped: {type(error).__name__}: {error}")
+            failed.append(f"plot {job.name} skipped: {type(error).__name__}: {error}")
     return plots
 
 
@@ -351,7 +403,8 @@ def _run_extra(run: LineDelayRun) -> dict:
     d = run.detection
     return {"video": run.inputs.get("video"), "detection_dropped": d.dropped, "frames_detected": d.frames_detected,
             "timestamps_from": d.timestamps, "detection_time_s": d.detect_time_s} | run.settings \
-        | ({"guidance": run.guidance} if run.guidance else {})
+        | ({"guidance": run.guidance} if run.guidance else {}) \
+        | ({"diagnosis": run.diagnosis.to_dict()} if run.diagnosis is not None else {})
 
 
 def run_summary(run: LineDelayRun) -> dict:
@@ -402,7 +455,7 @@ def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, verdict: Op
             else:
                 notes.append(skipped)
         if report:  # listed now, drawn after the result is out; result.json is rewritten if one fails
-            files["plots"] = [name for _, _, name in _plot_jobs(result, verdict)]
+            files["plots"] = [job.name for job in _plot_jobs(result, verdict)]
             files["report"] = "report.html"
         summary["warnings"] = warnings
         summary["export_notes"] = notes
@@ -413,7 +466,7 @@ def write_outputs(result: Estimate, camera: CameraModel, out_dir, *, verdict: Op
         if report:
             plots = _plots(result, verdict, out, warnings)
             if len(plots) < len(files["plots"]):
-                files["plots"] = [p.name for p in plots.values()]
+                files["plots"] = list(plots)
                 result_path = write_result_json(out, summary, command=command, inputs=inputs)
             if title is None:
                 title = "rscalib linedelay" + (" (the linear baseline)" if isinstance(result, LinearInterpResult) else "")
@@ -457,39 +510,85 @@ def _provenance_of(result_path: Path) -> dict:
 
 
 def _table_rows(summary: dict) -> list[tuple[str, object]]:
+    """The result, in words a newcomer reads (the expert's numbers: _expert_rows)."""
     std = summary["line_delay_std_s"]
+    if (summary.get("verdict") or {}).get("status") == NOT_DETERMINED:
+        value, spread = "not determined by this video", "—"
+    else:
+        value = f"{summary['line_delay_s'] * 1e6:.4f} µs per row"
+        spread = "—" if std is None else f"± {std * 1e6:.4f} µs per row (one standard deviation)"
+    return [("line delay (time between the start of two rows)", value),
+            ("its uncertainty", spread),
+            ("readout time of the sensor", "—" if summary.get("readout_time_s") is None else
+             f"{summary['readout_time_s'] * 1e3:.3f} ms over {summary['rows']} rows"),
+            ("readout time of the image", "—" if summary.get("image_readout_time_s") is None else
+             f"{summary['image_readout_time_s'] * 1e3:.3f} ms, first to last image row (Gyroflow's "
+             "frame_readout_time)"),
+            ("frames used", f"{summary['frames_used']} of {summary['frames_total']}"),
+            ("board corners used", summary["observations"])]
+
+
+def _expert_rows(summary: dict) -> list[tuple[str, object]]:
+    """The solver's numbers, each with what it means."""
     if summary.get("trajectory_model") == "linear":
         size = ("frame poses / interpolated intervals / chains",
                 f"{summary['knots']} / {summary['segments']} / {summary['chains']}")
     else:
-        size = ("knot segments", summary["segments"])
-    if (summary.get("verdict") or {}).get("status") == NOT_DETERMINED:
-        value, spread = "not determined", "—"
-    else:
-        value = f"{summary['line_delay_s'] * 1e6:.4f} µs/row"
-        spread = "—" if std is None else f"{std * 1e6:.4f} µs/row"
-    return [("line delay", value),
-            ("standard deviation", spread),
-            ("readout time (sensor)", "—" if summary.get("readout_time_s") is None else
-             f"{summary['readout_time_s'] * 1e3:.4f} ms ({summary['rows']} rows read out)"),
-            ("image readout time", "—" if summary.get("image_readout_time_s") is None else
-             f"{summary['image_readout_time_s'] * 1e3:.4f} ms (first to last image row; Gyroflow's frame_readout_time)"),
-            ("frames used / total", f"{summary['frames_used']} / {summary['frames_total']}"),
-            ("observations", summary["observations"]),
+        size = ("knot segments of the trajectory (more where the motion is fast)", summary["segments"])
+    solver_std = summary.get("solver_line_delay_std_s")
+    return [("normalised cost J/2N (1 when the noise model fits; below 1 it overestimates the noise, so the "
+             "uncertainty is on the safe side)", f"{summary['normalised_cost']:.3f}"),
+            ("rms of the residuals", f"{summary['rms_px']:.4f} px"),
+            ("detection noise σ", f"{summary['pixel_sigma']:.4f} px ({summary['pixel_sigma_source']})"),
+            ("the solver's σ of d, before the halves' widening",
+             "—" if solver_std is None else f"{solver_std * 1e6:.4f} µs per row"),
             size,
-            ("rms residual", f"{summary['rms_px']:.4f} px"),
-            ("pixel sigma", f"{summary['pixel_sigma']:.4f} px ({summary['pixel_sigma_source']})"),
-            ("normalised cost J/2N", f"{summary['normalised_cost']:.4f}"),
-            ("converged", summary["converged"]),
+            ("solver converged", "yes" if summary["converged"] else "no"),
             ("solve time", f"{summary['solve_time_s']:.2f} s")]
 
 
-def _fact(value) -> str:
-    if isinstance(value, dict):
-        return ", ".join(f"{k} {_fact(v)}" for k, v in value.items())
-    if isinstance(value, float):
-        return f"{value:.3g}"
-    return str(value)
+_ROTATION_WORDS = {"x (pitch)": "pitch (about x)", "y (yaw)": "yaw (about y)", "z (roll)": "roll (about z)"}
+_DROP_WORDS = {"no_target": "no board found", "blurred": "blurred", "left_image": "board left the image",
+               "unreadable": "unreadable", "outliers": "bad corners", "bad_timestamp": "bad time stamp"}
+
+
+def guidance_rows(guidance: dict) -> list[tuple[str, str]]:
+    """The guidance block of result.json as (label with its unit, value) rows for the report."""
+    rows = []
+    if "row_span" in guidance:
+        rows.append(("image rows the board covered (2nd to 98th percentile)", f"{guidance['row_span'] * 100:.0f} %"))
+    deciles = guidance.get("row_coverage_deciles")
+    if deciles:
+        marks = "".join("■" if x else "□" for x in deciles)
+        rows.append(("tenths of the image height with the board, top to bottom",
+                     f"{marks} ({sum(deciles)} of {len(deciles)})"))
+    speed = guidance.get("image_speed_px_s")
+    if speed:
+        rows.append(("speed of the board in the image", f"median {speed['median']:.0f} px/s, 90 % below "
+                     f"{speed['p90']:.0f} px/s"))
+    if "image_speed_across_rows_px_s" in guidance:
+        rows.append(("horizontal image speed (across the rows: shows the line delay best)",
+                     f"median {guidance['image_speed_across_rows_px_s']:.0f} px/s"))
+    if "image_speed_along_columns_px_s" in guidance:
+        rows.append(("vertical image speed", f"median {guidance['image_speed_along_columns_px_s']:.0f} px/s"))
+    rates = guidance.get("angular_rate_rms_deg_s")
+    if rates:
+        rows.append(("camera rotation rate (rms)", ", ".join(f"{_ROTATION_WORDS.get(k, k)} {v:.0f} °/s"
+                                                             for k, v in rates.items())))
+    blur = guidance.get("blur_px")
+    if blur:
+        rows.append(("blur (width of the board's edges)", f"median {blur['median']:.1f} px, 90 % below "
+                     f"{blur['p90']:.1f} px; {blur['blurred_fraction'] * 100:.0f} % of frames blurred"))
+    if "frames_dropped" in guidance:
+        dropped = guidance["frames_dropped"]
+        rows.append(("frames without a usable board", ", ".join(f"{_DROP_WORDS.get(k, k)}: {n}"
+                                                                for k, n in dropped.items()) or "none"))
+    if guidance.get("video_bits_per_pixel") is not None:
+        rows.append(("video bitrate", f"{guidance['video_bits_per_pixel']:.2f} bit per pixel (phones record "
+                     "about 0.2-0.4)"))
+    if guidance.get("error"):
+        rows.append(("advice could not be worked out", guidance["error"]))
+    return rows
 
 
 def _half(h: dict) -> str:
@@ -519,30 +618,43 @@ def intrinsics_html(summary: dict) -> str:
             "result.json (intrinsics.covariance); the camera files carry the refined intrinsics.</p>")
 
 
+def _self_check_html(check: Optional[dict]) -> str:
+    if not check:
+        return ""
+    state = {True: "agree", False: "disagree", None: "could not be compared"}[check.get("agree")]
+    z = check.get("z")
+    said = ""
+    if z is not None:
+        said = (f"They differ by {z:.2f} of their combined σ" + (" (3 or less is agreement)" if z <= 3 else
+                " (more than 3: one of them, or both, is wrong)"))
+        if check.get("widen", 1.0) > 1.0:
+            said += f"; the uncertainty above is widened ×{check['widen']:.2f} accordingly (the Birge ratio)"
+        said += "."
+    return (f"<h2>Self-check: the two halves of the video {state}</h2><p>Each half of the video is solved on its "
+            f"own.</p>{list_html(_half(h) for h in check.get('halves', []))}<p>{escape(said)}</p>")
+
+
 def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict,
                 provenance: Optional[dict] = None) -> None:
     warnings = summary["warnings"]
     guidance = summary.get("guidance") or {}
-    facts = [(k, _fact(val)) for k, val in guidance.items() if k != "advice"]
     guidance_html = ("<h2>How the video could be better</h2>" + (list_html(guidance.get("advice", [])) or
                      "<p>Nothing to change: coverage, motion, blur and drops are fine.</p>")
-                     + table_html(facts)) if guidance else ""
-    check = summary.get("self_check")
-    check_html = ""
-    if check:
-        state = {True: "agree", False: "disagree", None: "inconclusive"}[check.get("agree")]
-        z = "" if check.get("z") is None else f" (z = {check['z']:.2f})"
-        check_html = (f"<h2>Self-check: the two halves {state}{escape(z)}</h2>"
-                      f"{list_html(_half(h) for h in check.get('halves', []))}<p>{escape(check.get('rule', ''))}</p>")
+                     + table_html(guidance_rows(guidance))) if guidance else ""
     notes = summary.get("export_notes", [])
-    figures = "".join(figure_html(Figure(p, name)) for name, p in plots.items())
-    sections = [f"<h2>Result</h2>{table_html(_table_rows(summary))}", check_html, intrinsics_html(summary),
+    main = "".join(figure_html(f) for f, expert in plots.values() if not expert)
+    expert = "".join(figure_html(f) for f, expert in plots.values() if expert)
+    caveats = list_html(v.caveats)
+    sections = [f"<h2>Result</h2>{table_html(_table_rows(summary))}",
+                f"<p>Notes on the verdict:</p>{caveats}" if caveats else "",
+                _self_check_html(summary.get("self_check")), intrinsics_html(summary),
                 guidance_html, f"<h2>Warnings</h2>{list_html(warnings)}" if warnings else "",
-                f"<h2>Plots</h2>{figures}",
+                f"<h2>Plots</h2>{main}" if main else "",
                 f"<p>About the exports:</p>{list_html(notes)}" if notes else "",
                 "<p>Conventions: row 0 of a frame is exposed at its timestamp, row v at t + v·d; trajectory.csv holds "
                 "the world(target)-to-camera pose, trajectory_tum.txt the camera-to-world pose; formats: "
                 "docs/formats.md.</p>"]
-    write_report(path, title, v, sections, files=summary["files"], provenance=provenance,
+    appendix = (f"<h3>The solver's numbers</h3>{table_html(_expert_rows(summary))}" + expert)
+    write_report(path, title, v, sections, files=summary["files"], provenance=provenance, appendix=appendix,
                  advice_line="How to film a better calibration video: run `rscalib guide capture` (the guide comes "
                              "with rscalib).")
