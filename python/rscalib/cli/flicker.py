@@ -71,7 +71,7 @@ def add_parser(sub) -> None:
     p.add_argument("--readout", type=readout_flag, default=None, metavar="|".join((AUTO,) + ROW_DIRECTIONS),
                    help="readout direction in the image: auto (measured by the phase drift of timestamped frames; "
                         "else top-to-bottom is assumed and said), or given (bottom-to-top: negative line delay); "
-                        f"top-down and bottom-up are read too (default: {_default('readout')})")
+                        f"the words of earlier versions are read too (default: {_default('readout')})")
     p.add_argument("--max-frames", type=FRAMES, default=None, metavar="N", help="use the first N readable frames")
     p.add_argument("--method", choices=METHODS, default=None,
                    help="auto (phase drift when the frames have timestamps, cross-checked by the spectrum), "
