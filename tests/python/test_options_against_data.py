@@ -28,3 +28,18 @@ def test_flicker_refuses_fewer_rows_than_the_image():
         rscalib.estimate_line_delay_flicker(frames, 100.0, rscalib.FlickerOptions(rows=200), timestamps_s=times)
     run = rscalib.estimate_line_delay_flicker(frames, 100.0, rscalib.FlickerOptions(rows=250), timestamps_s=times)
     assert run.result.rows == 250      # more rows than the image (blanking) are accepted
+
+
+def test_a_readout_direction_the_data_contradict_is_not_trusted():
+    """A top-to-bottom video calibrated as bottom-to-top: d comes out clearly negative, and the
+    verdict says the direction is contradicted (first) instead of trusting or blaming the motion."""
+    sim = simulate_default(duration_s=3.0, seed=2)
+    c = sim.camera
+    camera = rscalib.CameraModel(c.model, c.params, c.width, c.height)
+    right = rscalib.calibrate_video(sim.observations, camera=camera, options=rscalib.LineDelayOptions())
+    wrong = rscalib.calibrate_video(sim.observations, camera=camera,
+                                    options=rscalib.LineDelayOptions(readout="bottom-to-top"))
+    assert right.line_delay_s > 0 and "readout" not in " ".join(right.verdict.reasons)
+    assert wrong.result.line_delay_s < 0
+    assert wrong.verdict.status == "not trusted" and wrong.verdict.exit_code == 4
+    assert "read in the other direction" in wrong.verdict.reasons[0], wrong.verdict.reasons

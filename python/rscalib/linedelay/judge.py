@@ -22,7 +22,10 @@ from ..verdict import NOT_DETERMINED, NOT_TRUSTED, TRUSTED, Verdict
 # What a finding blames, in the words of result.json's `diagnosis`.
 TARGET_SIZE, CAMERA, MOTION, STABILISATION, COMPRESSION, COVERAGE, SOLVER = (
     "target_size", "camera", "motion", "stabilisation", "compression", "coverage", "solver")
-CAUSES = (TARGET_SIZE, CAMERA, MOTION, STABILISATION, COMPRESSION, COVERAGE, SOLVER)
+READOUT = "readout"
+CAUSES = (TARGET_SIZE, CAMERA, MOTION, STABILISATION, COMPRESSION, COVERAGE, SOLVER, READOUT)
+# a line delay this many sigma below 0 contradicts the readout direction used
+NEGATIVE_SIGMA = 3.0
 
 # J/2N above this: the model does not fit the detections (below 1 only says that the noise model
 # overestimates sigma: sigma_d is then conservative, which is no reason to distrust it)
@@ -401,6 +404,13 @@ def diagnose_evidence(e: dict) -> Diagnosis:
     if cost is not None and cost < 1.0 / MAX_COST and not findings:
         findings.append(Finding(MOTION, "caveat", f"J/2N = {cost:.2f} is below 1: the noise model overestimates "
                                 "the detection noise, so sigma_d is on the safe side"))
+    if d is not None and e["std_s"] and d < -NEGATIVE_SIGMA * e["std_s"]:
+        # the rows were turned to top-to-bottom by the readout given (or assumed): a shutter reads
+        # forwards, so a clearly negative d says the data contradict that direction (issue 33)
+        findings.insert(0, Finding(READOUT, NOT_TRUSTED, f"the line delay came out negative ({_us(d)} us/row, "
+                                   f"{-d / e['std_s']:.0f} sigma below 0): the rows are read in the other direction "
+                                   "than the one given or assumed", "give the opposite --readout (bottom-to-top "
+                                   "for top-to-bottom, right-to-left for left-to-right, or the reverse)"))
     trusted = not any(f.weight != "caveat" for f in findings)
     std = e["std_s"]
     readout = None if d is None else abs(d) * e["rows"]
