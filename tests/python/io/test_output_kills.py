@@ -103,6 +103,16 @@ runpy.run_path(sys.argv[0], run_name="__main__")
 """.replace("COUNTED", repr(COUNTED))
 
 
+@pytest.fixture(autouse=True)
+def _ctrl_c_as_at_a_terminal():
+    """Ctrl-C raises KeyboardInterrupt here and in the forked command, as at a terminal, even when
+    pytest was started in the background of a script (SIGINT then arrives ignored, and Python
+    keeps it so)."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
+
+
 def _gone(pid: int) -> bool:
     try:
         return Path(f"/proc/{pid}/stat").read_text().split(") ")[-1].startswith(("Z", "X"))
