@@ -17,7 +17,7 @@ Every base video is run with its exact camera (clean) and with about three of th
     digital stabilisation: each frame shifted to cancel the fast part of the board's image motion
     re-encoded at 0.04 bit/pixel (a messaging app) instead of the phone's 0.22
 
-The encodings are H.264 through imageio-ffmpeg when it is installed (the phone's), else MPEG-4 part 2.
+The encodings are H.264 through imageio-ffmpeg (the phone's; `pip install 'rscalib[bench]'`).
 A fault's *cause* is what the verdict should name first (judge.CAUSES). The bars: trusted-and-wrong
 (|error| > 3 sigma while trusted) <= 1 % of the runs, clean videos not trusted <= 5 %, and the first
 cause named right in >= 80 % of the faulty runs the verdict does not trust. Runs with the advice
@@ -135,8 +135,10 @@ def render(case: dict, videos: Path) -> Path:
 # ------------------------------------------------------------------------------------ the encodings
 
 def _ffmpeg() -> str:
-    import imageio_ffmpeg  # the phone's H.264 (libx264); pip install imageio-ffmpeg
-
+    try:
+        import imageio_ffmpeg  # the phone's H.264 (libx264)
+    except ImportError:
+        sys.exit("bench_linedelay_verdict: the phone's H.264 needs imageio-ffmpeg: pip install 'rscalib[bench]'")
     return imageio_ffmpeg.get_ffmpeg_exe()
 
 

@@ -48,9 +48,19 @@ from .linear import LinearInterpResult, calibrate_line_delay_linear
 from .options import LineDelayOptions, LocalizeOptions
 from .pnp import PnpTrajectory, compare_with_pnp, per_frame_pnp, pnp_trajectory
 from .readout import rotation_hint, time_window, to_top_to_bottom
-from .spline import LineDelayResult, RoundRecord, calibrate_line_delay, joined_trajectory, localize
+from .spline import (
+    LineDelayResult,
+    RoundRecord,
+    calibrate_line_delay,
+    joined_trajectory,
+    localize,
+    refit_with_intrinsics,
+)
 
 PROBE_FIRST_DETECTED = 150   # detected frames the target-mismatch probe samples from
+# The camera check's solver steps from the solution (the first is damped): 3 gave the converged shift
+# to 0.2 % on the 60 s render with f off by 3 and 6 %, 2 to 4-26 % (docs/benchmarks.md, issue 31).
+CAMERA_CHECK_STEPS = 3
 
 PathLike = Union[str, Path]
 DetectionCallback = Optional[Callable[[DetectionResult], None]]
@@ -214,7 +224,7 @@ def calibrate_video(video: VideoInput, target: Union[None, PathLike, Target] = N
               "camera": None if camera_path is None else str(camera_path)}
     camera_check = None
     if options.baseline is None and not options.refine_intrinsics and readout == TOP_TO_BOTTOM:
-        camera_check = check_camera(observations, solve_camera, options, result)
+        camera_check = check_camera(solve_camera, options, result)
     bits_per_pixel = video_bits_per_pixel(video_path) if video_path else None
     try:
         guidance = capture_guidance(result, detection, bits_per_pixel)
@@ -226,28 +236,25 @@ def calibrate_video(video: VideoInput, target: Union[None, PathLike, Target] = N
                         diagnosis)
 
 
-def check_camera(observations: Observations, camera: CameraModel, options: LineDelayOptions,
-                 result: LineDelayResult) -> Optional[dict]:
-    """The whole video solved once more with the intrinsics refined (formulation §14, from the solved
-    trajectory and d): how far d moves, in the data's sigma, says whether the camera file matters at
-    this video's precision (docs/formulation.md §17). A camera file a few per cent off can bend d by
-    several sigma without a trace in the residuals (J/2N, the halves, the image field all normal: the
-    fresh verdict set 3900), so it runs on every determined estimate, not only when the residuals form
-    a fixed pattern over the image. None when d is not determined (nothing is solved)."""
+def check_camera(camera: CameraModel, options: LineDelayOptions, result: LineDelayResult) -> Optional[dict]:
+    """How far d moves when the intrinsics are freed under their prior from the solution (formulation
+    §17), in the data's sigma: whether the camera file matters at this video's precision. A camera file
+    a few per cent off can bend d by several sigma without a trace in the residuals (J/2N, the halves,
+    the image field all normal: the fresh verdict set 3900), so it runs on every determined estimate.
+    A few solver steps from the solution, on its knots and error weights, give the refined d to
+    0.2 % of the shift (a full re-solve with knot adaptation cost 3-5x as much: docs/benchmarks.md).
+    None when d is not determined (nothing is solved)."""
     if not result.determined:
         return None
     field = residual_structure(result)["image_field"]
     try:
-        refined = calibrate_line_delay(observations, camera, replace(options, refine_intrinsics=True),
-                                       frame_poses=result.frame_poses, start_trajectory=result.trajectory,
-                                       line_delay0_s=result.line_delay_s)
+        refined_s, cost = refit_with_intrinsics(result, camera, options, max_iterations=CAMERA_CHECK_STEPS)
     except InputError as error:
         return {"error": str(error)}
     # the data's sigma: before the halves' widening (with the noise model's inflation, §8)
     data_std = result.line_delay_std_s / max(1.0, float((result.self_check or {}).get("widen") or 1.0))
-    return {"image_field": field, "line_delay_s": float(refined.line_delay_s),
-            "line_delay_std_s": float(refined.line_delay_std_s), "normalised_cost": float(refined.normalised_cost),
-            "shift_sigma": float((refined.line_delay_s - result.line_delay_s) / data_std) if data_std > 0 else None}
+    return {"image_field": field, "line_delay_s": refined_s, "normalised_cost": cost,
+            "shift_sigma": float((refined_s - result.line_delay_s) / data_std) if data_std > 0 else None}
 
 
 def _frame_rate_or_none(result) -> Optional[float]:

@@ -436,6 +436,31 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
         camera=camera if refine_intrinsics else None, intrinsics=intrinsics)
 
 
+def refit_with_intrinsics(result: LineDelayResult, camera: CameraModel, options: LineDelayOptions, *,
+                          max_iterations: int) -> tuple[float, float]:
+    """d and J/2N after at most `max_iterations` solver steps from `result`'s solution with the intrinsics
+    freed under their prior (the camera check, docs/formulation.md §17): the same knots, observations and
+    error weights as `result`, so only the intrinsics move d. The first step is the linearised answer to
+    "how far would the camera file move d"; a few more follow its curvature. No sigma is computed."""
+    used = result.used_observations
+    weights = np.asarray(result.observation_sigma_px, dtype=np.float64)   # the final solve's
+    solver = _solver_options(float(weights[0]), estimate_line_delay=True,
+                             standardise_errors=options.standardise_errors, use_motion_prior=options.motion_prior,
+                             robust_loss=options.robust_loss, compute_covariance=False)
+    if result.pixel_sigma_source == "grid third differences":
+        solver.observation_sigma = weights
+    prior = options.intrinsics_prior
+    if prior is not None and not isinstance(prior, IntrinsicsPrior):
+        prior = load_intrinsics_prior(prior, camera)
+    _set_intrinsics_prior(solver, camera, prior)
+    solver.max_iterations = int(max_iterations)
+    solver.max_outer_iterations = 1   # d moves little: no re-attachment of observations to spans
+    solver.function_tolerance = _ROUND_FUNCTION_TOLERANCE
+    summary = solve_line_delay(used.frame_times_s[used.frame_index], used.uv, used.points_w(), camera,
+                               result.trajectory.copy(), result.line_delay_s, solver)
+    return float(summary.line_delay_s), float(summary.measurement_cost / max(1, 2 * summary.num_error_terms))
+
+
 def _set_intrinsics_prior(options: RsSolverOptions, camera: CameraModel,
                           prior: Optional[IntrinsicsPrior]) -> IntrinsicsPrior:
     """Switches the solver to the joint refinement of the intrinsics with `prior` (default:

@@ -288,3 +288,31 @@ def test_a_camera_file_a_few_percent_off_is_caught_by_the_camera_check():
     assert abs(run.diagnosis.evidence["camera_check"]["shift_sigma"]) >= judge.CAMERA_SHIFT_SIGMA
     assert not run.verdict.trusted and run.diagnosis.first_cause == judge.CAMERA
     assert "--refine-intrinsics" in run.verdict.reasons[0]
+
+
+@pytest.mark.parametrize("f_scale", [1.0, 0.94, 1.03])
+def test_the_camera_checks_few_steps_give_the_full_refined_solves_shift(f_scale):
+    """The camera check takes three solver steps from the solution with the intrinsics freed
+    (spline.refit_with_intrinsics). Its d must be the converged refined solve's: the whole video solved
+    again with --refine-intrinsics from the same solution, knots adapted, to tight tolerance."""
+    from dataclasses import replace
+
+    from rscalib._core import CameraModel
+    from rscalib.linedelay import pipeline
+    from rscalib.linedelay.spline import calibrate_line_delay, refit_with_intrinsics
+
+    observations, camera, _ = _rendered("render_640x480_handheld.npz")
+    params = np.array(camera.params, dtype=float)
+    params[:2] *= f_scale
+    camera = CameraModel("pinhole-radtan", params, camera.width, camera.height)
+    run = calibrate_video(observations, camera=camera)
+    result, options = run.result, run.options
+    full = calibrate_line_delay(result.used_observations, camera, replace(options, refine_intrinsics=True),
+                                frame_poses=result.frame_poses, start_trajectory=result.trajectory,
+                                line_delay0_s=result.line_delay_s)
+    refit_s, _ = refit_with_intrinsics(result, camera, options, max_iterations=pipeline.CAMERA_CHECK_STEPS)
+    data_std = result.line_delay_std_s / max(1.0, float(result.self_check.get("widen") or 1.0))
+    full_shift = (full.line_delay_s - result.line_delay_s) / data_std
+    refit_shift = (refit_s - result.line_delay_s) / data_std
+    assert abs(refit_shift - full_shift) <= 0.05 * abs(full_shift) + 0.1
+    assert run.diagnosis.evidence["camera_check"]["shift_sigma"] == pytest.approx(refit_shift)
