@@ -404,6 +404,31 @@ def _grey_centroids(gray: np.ndarray, uv: np.ndarray, iterations: int = 3) -> np
     return out
 
 
+def _cell_means(gray: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    """_mean_intensity of each of the (n, 4, 2) quads, the same numbers: the polygons and boxes are
+    computed for all at once (per call, NumPy's overhead on 4-point arrays was most of the cost)."""
+    if len(quads) == 0:
+        return np.zeros(0)
+    centres = quads.mean(axis=1)
+    polygons = np.round(centres[:, None, :] + 0.5 * (quads - centres[:, None, :])).astype(np.int32)
+    height, width = gray.shape[:2]
+    low = polygons.min(axis=1)
+    high = polygons.max(axis=1)
+    x0s, y0s = np.clip(low[:, 0], 0, width - 1).tolist(), np.clip(low[:, 1], 0, height - 1).tolist()
+    x1s, y1s = np.clip(high[:, 0] + 1, 1, width).tolist(), np.clip(high[:, 1] + 1, 1, height).tolist()
+    means = np.empty(len(quads))
+    for i, (x0, y0, x1, y1) in enumerate(zip(x0s, y0s, x1s, y1s)):
+        if x1 > x0 and y1 > y0:
+            mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
+            cv2.fillConvexPoly(mask, polygons[i] - np.array([x0, y0], np.int32), 1)
+            if cv2.countNonZero(mask):
+                means[i] = cv2.mean(gray[y0:y1, x0:x1], mask)[0]
+                continue
+        x, y = np.round(centres[i]).astype(int).tolist()
+        means[i] = float(gray[min(max(y, 0), height - 1), min(max(x, 0), width - 1)])
+    return means
+
+
 def _outer_ring_alternates(gray: np.ndarray, uv: np.ndarray, rows: int, cols: int,
                            max_wrong_fraction: float = 0.25) -> bool:
     """Whether the cells just outside a found rows x cols inner-corner grid are squares of the
@@ -414,20 +439,14 @@ def _outer_ring_alternates(gray: np.ndarray, uv: np.ndarray, rows: int, cols: in
     are not inside the image are not tested."""
     grid = uv.reshape(rows, cols, 2)
     height, width = gray.shape[:2]
-    inner = np.array([_mean_intensity(gray, np.array([grid[r, c], grid[r, c + 1], grid[r + 1, c + 1], grid[r + 1, c]]))
-                      for r in range(rows - 1) for c in range(cols - 1)])
-    if inner.size < 4:
-        return True
-    ordered = np.sort(inner)
-    dark, bright = ordered[:len(ordered) // 2].mean(), ordered[-(len(ordered) // 2):].mean()
-    if bright - dark < 20.0:
-        return True  # too little contrast to judge
-    mid = 0.5 * (dark + bright)
-    # (edge corners, the next row/column inwards) for the four sides
+    inner_quads = [np.array([grid[r, c], grid[r, c + 1], grid[r + 1, c + 1], grid[r + 1, c]])
+                   for r in range(rows - 1) for c in range(cols - 1)]
+    # (edge corners, the next row/column inwards) for the four sides; every tested ring cell is sampled
+    # with its inner neighbour, all in one batch
     sides = [(grid[0], grid[1]), (grid[-1], grid[-2]), (grid[:, 0], grid[:, 1]), (grid[:, -1], grid[:, -2])]
-    for edge, inward in sides:
+    side_of, pair_quads = [], []
+    for side, (edge, inward) in enumerate(sides):
         outside = 2.0 * edge - inward
-        tested = wrong = 0
         for k in range(len(edge) - 1):
             ring = np.array([outside[k], outside[k + 1], edge[k + 1], edge[k]])
             if ring[:, 0].min() < 2 or ring[:, 1].min() < 2 or ring[:, 0].max() > width - 3 or ring[:, 1].max() > height - 3:
@@ -438,12 +457,24 @@ def _outer_ring_alternates(gray: np.ndarray, uv: np.ndarray, rows: int, cols: in
             b = edge[k] + 0.75 * (edge[k + 1] - edge[k])
             oa = outside[k] + 0.25 * (outside[k + 1] - outside[k])
             ob = outside[k] + 0.75 * (outside[k + 1] - outside[k])
-            ring = np.array([a + 0.1 * (oa - a), b + 0.1 * (ob - b), b + 0.6 * (ob - b), a + 0.6 * (oa - a)])
-            neighbour = np.array([edge[k], edge[k + 1], inward[k + 1], inward[k]])
-            a, b = _mean_intensity(gray, ring), _mean_intensity(gray, neighbour)
-            tested += 1
-            if (a - mid) * (b - mid) >= 0 or abs(a - b) < 0.25 * (bright - dark):
-                wrong += 1
+            pair_quads += [np.array([a + 0.1 * (oa - a), b + 0.1 * (ob - b), b + 0.6 * (ob - b), a + 0.6 * (oa - a)]),
+                           np.array([edge[k], edge[k + 1], inward[k + 1], inward[k]])]
+            side_of.append(side)
+    means = _cell_means(gray, np.array(inner_quads + pair_quads).reshape(-1, 4, 2))
+    inner, pairs = means[:len(inner_quads)], means[len(inner_quads):].reshape(-1, 2)
+    if inner.size < 4:
+        return True
+    ordered = np.sort(inner)
+    dark, bright = ordered[:len(ordered) // 2].mean(), ordered[-(len(ordered) // 2):].mean()
+    if bright - dark < 20.0:
+        return True  # too little contrast to judge
+    mid = 0.5 * (dark + bright)
+    wrong_pairs = ((pairs[:, 0] - mid) * (pairs[:, 1] - mid) >= 0) | (np.abs(pairs[:, 0] - pairs[:, 1])
+                                                                      < 0.25 * (bright - dark))
+    side_of = np.array(side_of, dtype=int)
+    for side in range(4):
+        tested = int(np.count_nonzero(side_of == side))
+        wrong = int(np.count_nonzero(wrong_pairs[side_of == side]))
         if tested >= 3 and wrong > max_wrong_fraction * tested:
             return False
     return True
