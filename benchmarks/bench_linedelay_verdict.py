@@ -361,8 +361,10 @@ def summarise(rows: list[dict]) -> dict:
     faulty = [r for r in rows if r["fault"] != "clean"]
     faulty_flagged = [r for r in faulty if r["status"] in ("not trusted", "not determined")]
     clean = [r for r in rows if r["fault"] == "clean"]
-    advised = [r for r in rows if "refined" in r]
+    # advised: the verdict's reasons (re-judged ones too) say --refine-intrinsics; the outcome is the stored re-run
+    advised = [r for r in rows if "refined" in r and any("--refine-intrinsics" in x for x in r.get("reasons", []))]
     helped = [r for r in advised if r["refined"].get("status") == "trusted" and not wrong(r["refined"])]
+    not_advised = [r for r in rows if "refined" in r and r not in advised]
     trusted = [r for r in rows if r["status"] == "trusted"]
     return {
         "runs": len(rows), "table": table,
@@ -383,6 +385,11 @@ def summarise(rows: list[dict]) -> dict:
         "faulty_wrong": sum(wrong(r) for r in faulty),
         "faulty_wrong_flagged": sum(wrong(r) and r["status"] != "trusted" for r in faulty),
         "refine_advised": len(advised), "refine_helped": len(helped),
+        "refine_trusted_and_wrong": sum(r["refined"].get("status") == "trusted" and wrong(r["refined"]) for r in advised),
+        # re-runs of advice the rules no longer give, and how many of those would have helped
+        "refine_no_longer_advised": len(not_advised),
+        "refine_no_longer_advised_would_have_helped": sum(r["refined"].get("status") == "trusted"
+                                                          and not wrong(r["refined"]) for r in not_advised),
     }
 
 

@@ -282,6 +282,17 @@ def _camera_finding(e: dict, text: str) -> Finding:
     return Finding(CAMERA, NOT_TRUSTED, text, advice)
 
 
+def _refine_advice_only_first(findings: list) -> None:
+    """--refine-intrinsics is advised only when the camera is the first cause: where the camera was a
+    later finding (after the target size, the motion, stabilisation) the re-run never helped, in 23 of
+    23 benchmark runs (sets 3900 and 4300), and once it ended in an input error (the focal length
+    refined below 0 with a target in millimetres); where it was first it helped in 65 of 68
+    (docs/benchmarks.md, issue 31). A later camera finding says to calibrate the camera again instead."""
+    for finding in findings[1:]:
+        if finding.cause == CAMERA and "--refine-intrinsics" in finding.advice:
+            finding.advice = "calibrate the camera again (rscalib intrinsics) if this remains after that"
+
+
 def _half_costs(e: dict) -> list:
     return [c for c in e["halves_cost"] if c is not None]
 
@@ -342,6 +353,7 @@ def diagnose_evidence(e: dict) -> Diagnosis:
                                                   "file does not describe this camera"))
         if physical is not None:
             findings.insert(0, physical)
+        _refine_advice_only_first(findings)
         return Diagnosis(Verdict(NOT_DETERMINED, "Line delay not determined by this video.",
                                  [f.sentence() for f in findings], **quantity), findings, e)
     if physical is not None:
@@ -411,6 +423,7 @@ def diagnose_evidence(e: dict) -> Diagnosis:
                                    f"{-d / e['std_s']:.0f} sigma below 0): the rows are read in the other direction "
                                    "than the one given or assumed", "give the opposite --readout (bottom-to-top "
                                    "for top-to-bottom, right-to-left for left-to-right, or the reverse)"))
+    _refine_advice_only_first(findings)
     trusted = not any(f.weight != "caveat" for f in findings)
     std = e["std_s"]
     readout = None if d is None else abs(d) * e["rows"]

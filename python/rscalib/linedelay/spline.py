@@ -478,9 +478,15 @@ def _set_intrinsics_prior(options: RsSolverOptions, camera: CameraModel,
 
 
 def _with_params(camera: CameraModel, params) -> CameraModel:
-    """`camera` with other parameters (same model, size and pixel size)."""
-    return CameraModel(camera.model, np.asarray(params, dtype=np.float64), camera.width, camera.height,
-                       np.asarray(camera.pixel_size_mm, dtype=np.float64))
+    """`camera` with other parameters (same model, size and pixel size): the refined intrinsics, so a
+    camera the model refuses (a focal length refined below 0: the verdict benchmark's target in
+    millimetres) is said as what it is."""
+    try:
+        return CameraModel(camera.model, np.asarray(params, dtype=np.float64), camera.width, camera.height,
+                           np.asarray(camera.pixel_size_mm, dtype=np.float64))
+    except InputError as error:
+        raise InputError(f"--refine-intrinsics: the refined intrinsics are not a camera ({error}): the video does not "
+                         "determine them; check the target file's square size and the camera file") from None
 
 
 def _intrinsics_summary(summary, start: CameraModel, refined: CameraModel, prior: IntrinsicsPrior,

@@ -316,3 +316,22 @@ def test_the_camera_checks_few_steps_give_the_full_refined_solves_shift(f_scale)
     refit_shift = (refit_s - result.line_delay_s) / data_std
     assert abs(refit_shift - full_shift) <= 0.05 * abs(full_shift) + 0.1
     assert run.diagnosis.evidence["camera_check"]["shift_sigma"] == pytest.approx(refit_shift)
+
+
+@pytest.mark.parametrize("determined", [True, False])
+def test_refine_intrinsics_is_advised_only_when_the_camera_is_the_first_cause(determined):
+    """On the verdict sets 3900 and 4300 a --refine-intrinsics re-run never helped where the camera came after
+    another cause (23 of 23: the target in millimetres, a vibrating half, stabilisation), and helped in 65 of 68
+    where the camera came first."""
+    pattern = structure(field=30.0)
+    camera_first = judge.diagnose_evidence(evidence(normalised_cost=1.8, halves_cost=[1.8, 1.8], **pattern))
+    assert camera_first.first_cause == judge.CAMERA and "--refine-intrinsics" in camera_first.verdict.reasons[0]
+    # the board 500 m away (a target in millimetres) comes first; the camera's pattern is said without the flag
+    changes = dict(normalised_cost=9.0, halves_cost=[7.0, 11.0], board_distance_m=500.0, square_m=40.0, **pattern)
+    if not determined:
+        changes |= dict(determined=False, data_std_s=None, std_s=None)
+    later = judge.diagnose_evidence(evidence(**changes))
+    assert later.first_cause == judge.TARGET_SIZE
+    assert judge.CAMERA in later.causes
+    assert not any("--refine-intrinsics" in reason for reason in later.verdict.reasons)
+    assert any("calibrate the camera again" in reason for reason in later.verdict.reasons)
