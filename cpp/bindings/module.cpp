@@ -5,6 +5,8 @@
 #include <unordered_map>
 #include <utility>
 
+#include <glog/logging.h>
+
 #include "bindings.hpp"
 #include "rscalib/core/error.hpp"
 
@@ -108,6 +110,10 @@ PYBIND11_MODULE(_core, m) {
       "the SOG filter bank and the self-calibration bundle adjustment.";
   m.attr("__version__") = RSCALIB_VERSION;
   py::register_exception<rscalib::InputError>(m, "InputError", PyExc_ValueError);
+  // Ceres' warnings (e.g. "Jacobian matrix is rank deficient" from a covariance the solver then
+  // reports as unavailable) would reach the user's terminal as glog lines; the core reports every
+  // such outcome itself. Errors still print.
+  FLAGS_minloglevel = google::GLOG_ERROR;
   rscalib::python::BindSpline(m);
   rscalib::python::BindGeometry(m);
   rscalib::python::BindCamera(m);
