@@ -21,9 +21,10 @@ bool HasInfinity(const double* values, Eigen::Index count) {
   return false;
 }
 
-// How far R^T R may be from I, and det R from 1: a rotation matrix written with %.9g or built
-// from floats passes; a scaled, sheared or reflected matrix does not.
-constexpr double kRotationTolerance = 1e-6;
+// How far R^T R may be from I: a matrix that is not a rotation at all (a scale of 2, a shear, a
+// reflection) is refused; a small departure (rounding, the self-calibration's mean of unit
+// quaternions, which is not one) is taken to its rotation, as before.
+constexpr double kRotationTolerance = 0.5;
 
 }  // namespace
 
@@ -61,7 +62,7 @@ void BindGeometry(py::module_& m) {
           const double off =
               (rotation.transpose() * rotation - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
           const double det = rotation.determinant();
-          if (!(off <= kRotationTolerance) || !(std::abs(det - 1.0) <= kRotationTolerance))
+          if (!(off <= kRotationTolerance) || !(det > 0.0))
             throw InputError("rotation is not a rotation matrix (|R^T R - I| = " +
                              std::to_string(off) + ", det R = " + std::to_string(det) + ")");
         }

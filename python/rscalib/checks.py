@@ -48,7 +48,8 @@ def number(value: Any, name: str, low: Optional[float] = None, high: Optional[fl
         raise InputError(f"{name} must be a number, not {_shown(value)}")
     number_ = float(value)
     if out_of_range(number_, low, high, low_open):
-        raise InputError(f"{name} must be {range_words(low, high, low_open)}{unit}, not {number_!r}")
+        finite = "" if math.isfinite(number_) else "a finite number "
+        raise InputError(f"{name} must be {finite}{range_words(low, high, low_open)}{unit}, not {number_!r}")
     return number_
 
 
@@ -101,7 +102,7 @@ def source(value: Any, name: str, also: tuple = (), also_words: str = "") -> Any
         return value
     if isinstance(value, (list, tuple)):
         if not value:
-            raise InputError(f"{name} is empty: give {words}")
+            raise InputError(f"{name} is empty: no input images or video given (give {words})")
         for item in value:
             if not isinstance(item, (str, os.PathLike)):
                 raise InputError(f"{name} must be {words}, not a list holding {_shown(item)}")

@@ -37,6 +37,7 @@ Only the previous frame is kept; per track a small patch and a descriptor. Frame
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from dataclasses import dataclass, field, fields
 from typing import Iterable, Optional
@@ -564,8 +565,11 @@ class FeatureTracker:
         if (image.shape[1], image.shape[0]) != self.image_size:
             raise InputError(f"frame {self._k + 1} is {image.shape[1]}x{image.shape[0]}, expected "
                              f"{self.image_size[0]}x{self.image_size[1]} (all frames must have one size)")
-        t_s = checks.number(t_s, f"frame {self._k + 1}: the time (s)")
-        if self._t_s and not t_s > self._t_s[-1]:
+        if isinstance(t_s, bool) or not isinstance(t_s, numbers.Real):
+            raise InputError(f"frame {self._k + 1}: the time must be a number of seconds, not {t_s!r}")
+        if not math.isfinite(float(t_s)):
+            raise InputError(f"frame {self._k + 1}: time {t_s} is not finite")
+        if self._t_s and not float(t_s) > self._t_s[-1]:
             raise InputError(f"frame {self._k + 1}: time {t_s} s does not increase (previous {self._t_s[-1]} s)")
         return np.ascontiguousarray(image)
 
