@@ -1,19 +1,75 @@
 // Bindings: rotation vectors.
+#include <cmath>
+#include <string>
+
+#include <Eigen/LU>
 #include <pybind11/eigen.h>
 
 #include "bindings.hpp"
+#include "rscalib/core/error.hpp"
 #include "rscalib/geometry/rotation.hpp"
 
 namespace rscalib::python {
 
+namespace {
+
+// NaN stands for a rotation that is not known (a frame PnP failed on) and stays NaN; infinity is
+// no rotation at all.
+bool HasInfinity(const double* values, Eigen::Index count) {
+  for (Eigen::Index i = 0; i < count; ++i)
+    if (std::isinf(values[i])) return true;
+  return false;
+}
+
+// How far R^T R may be from I: a matrix that is not a rotation at all (a scale of 2, a shear, a
+// reflection) is refused; a small departure (rounding, the self-calibration's mean of unit
+// quaternions, which is not one) is taken to its rotation, as before.
+constexpr double kRotationTolerance = 0.5;
+
+}  // namespace
+
 void BindGeometry(py::module_& m) {
-  m.def("unwrap_rotation_vectors", &geometry::UnwrapRotationVectors, py::arg("rotation_vectors"),
-        "Paper eq. 22: make a (n, 3) sequence of rotation vectors continuous (2*pi per axis).");
+  m.def(
+      "unwrap_rotation_vectors",
+      [](const Eigen::MatrixX3d& rotation_vectors) {
+        if (HasInfinity(rotation_vectors.data(), rotation_vectors.size()))
+          throw InputError(
+              "rotation_vectors has an infinite value (NaN rows, unknown rotations, stay NaN)");
+        return geometry::UnwrapRotationVectors(rotation_vectors);
+      },
+      py::arg("rotation_vectors"),
+      "Paper eq. 22: make a (n, 3) sequence of rotation vectors continuous (2*pi per axis); NaN "
+      "rows "
+      "(unknown rotations) stay NaN.");
   m.def(
       "rotation_vector_to_matrix",
-      [](const Eigen::Vector3d& phi) { return geometry::RotationVectorToMatrix(phi.data()); },
-      py::arg("rotation_vector"));
-  m.def("rotation_matrix_to_vector", &geometry::RotationMatrixToVector, py::arg("rotation"));
+      [](const Eigen::Vector3d& phi) {
+        if (HasInfinity(phi.data(), 3))
+          throw InputError(
+              "rotation_vector has an infinite value (NaN, an unknown rotation, gives NaN)");
+        if (!phi.allFinite()) return Eigen::Matrix3d::Constant(std::nan("")).eval();
+        return geometry::RotationVectorToMatrix(phi.data());
+      },
+      py::arg("rotation_vector"),
+      "R = exp([phi]x) of a rotation vector phi (radians); NaN (an unknown rotation) gives NaN.");
+  m.def(
+      "rotation_matrix_to_vector",
+      [](const Eigen::Matrix3d& rotation) {
+        if (HasInfinity(rotation.data(), 9))
+          throw InputError("rotation has an infinite value (NaN, an unknown rotation, gives NaN)");
+        if (!rotation.allFinite()) return Eigen::Vector3d::Constant(std::nan("")).eval();
+        {
+          const double off =
+              (rotation.transpose() * rotation - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+          const double det = rotation.determinant();
+          if (!(off <= kRotationTolerance) || !(det > 0.0))
+            throw InputError("rotation is not a rotation matrix (|R^T R - I| = " +
+                             std::to_string(off) + ", det R = " + std::to_string(det) + ")");
+        }
+        return geometry::RotationMatrixToVector(rotation);
+      },
+      py::arg("rotation"),
+      "phi (angle in [0, pi]) of a rotation matrix; NaN (an unknown rotation) gives NaN.");
 }
 
 }  // namespace rscalib::python

@@ -1,11 +1,13 @@
 // Bindings: cubic B-spline, spline fitting and poses of a pose spline.
 #include <limits>
+#include <string>
 
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
 #include "bindings.hpp"
 #include "rscalib/core/error.hpp"
+#include "rscalib/core/memory_limit.hpp"
 #include "rscalib/spline/cubic_bspline.hpp"
 #include "rscalib/spline/pose_spline.hpp"
 #include "rscalib/spline/spline_fit.hpp"
@@ -17,13 +19,21 @@ using spline::CubicBSpline;
 
 namespace {
 
+// Elements of a numpy array (before any conversion); 1 for anything else.
+py::ssize_t CountOf(const py::object& values) {
+  return py::isinstance<py::array>(values) ? py::reinterpret_borrow<py::array>(values).size() : 1;
+}
+
 // Evaluates at a scalar (returns (N,)) or at an array of times (returns (m, N)).
 py::array_t<double> Evaluate(const CubicBSpline& curve, const py::object& t, int derivative) {
   const bool scalar = py::isinstance<py::float_>(t) || py::isinstance<py::int_>(t);
+  // the result's size from the array as given, before converting it (a broadcast array is a copy)
+  CheckMemory(8.0 * static_cast<double>(CountOf(t)) * (curve.dimension() + 1),
+              "evaluate at " + std::to_string(CountOf(t)) + " times (t)");
   DoubleArray times = DoubleArray::ensure(t);
   if (!times) throw InputError("t must be a number or an array of numbers");
   const py::ssize_t count = times.size();
-  if (count > std::numeric_limits<int>::max()) throw InputError("too many times to evaluate");
+  if (count > std::numeric_limits<int>::max()) throw InputError("t: too many times to evaluate");
   py::array_t<double> out({count, static_cast<py::ssize_t>(curve.dimension())});
   const double* in = times.data();
   double* dst = out.mutable_data();
@@ -135,10 +145,16 @@ acceleration_weight: [] (none), [lambda] or one lambda per dimension.)doc");
 
   m.def(
       "poses_at",
-      [](const CubicBSpline& pose_spline, const DoubleArray& times) {
+      [](const CubicBSpline& pose_spline, const py::object& times_in) {
         spline::CheckPoseSpline(pose_spline);
+        // R (9), p (3), the spline's state (6) and the times (1) per time, refused before any of it
+        // is allocated (a broadcast array of times is copied when converted)
+        CheckMemory(8.0 * 19.0 * static_cast<double>(CountOf(times_in)),
+                    "poses_at: " + std::to_string(CountOf(times_in)) + " times");
+        const DoubleArray times = DoubleArray::ensure(times_in);
+        if (!times) throw InputError("times must be an array of numbers");
         const py::ssize_t count = times.size();
-        if (count > std::numeric_limits<int>::max() / 6) throw InputError("too many times");
+        if (count > std::numeric_limits<int>::max() / 6) throw InputError("times: too many times");
         py::array_t<double> rotations({count, py::ssize_t{3}, py::ssize_t{3}});
         py::array_t<double> translations({count, py::ssize_t{3}});
         std::vector<double> states(static_cast<size_t>(count) * 6);

@@ -1180,14 +1180,18 @@ def linear_interp_pose_state(pose_a: typing.Annotated[numpy.typing.ArrayLike, nu
     """
     T_cw [p; phi] at parameter s between poses a and b: centre linear, rotation SLERP.
     """
-def poses_at(pose_spline: BSpline, times: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64]]:
+def poses_at(pose_spline: BSpline, times: typing.Any) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64]]:
     """
     T_cw(t) of a 6-D pose spline [p; phi] at many times: (R (m, 3, 3), p (m, 3)), x_c = R x_w + p.
     """
 def rotation_matrix_to_vector(rotation: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[3, 3]"]) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[3, 1]"]:
-    ...
+    """
+    phi (angle in [0, pi]) of a rotation matrix; NaN (an unknown rotation) gives NaN.
+    """
 def rotation_vector_to_matrix(rotation_vector: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[3, 1]"]) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[3, 3]"]:
-    ...
+    """
+    R = exp([phi]x) of a rotation vector phi (radians); NaN (an unknown rotation) gives NaN.
+    """
 def solve_bundle(camera: CameraModel, keyframe_poses: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], observation_keyframe: numpy.ndarray, observation_point: numpy.ndarray, uv_px: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], image_velocity_px_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], point_anchor: numpy.ndarray, points: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], free_intrinsics: collections.abc.Sequence[bool] | None = None, line_delay_s: typing.SupportsFloat | typing.SupportsIndex = 0.0, estimate_line_delay: bool = False, line_delay_prior: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex] | None = None, reference_row: typing.SupportsFloat | typing.SupportsIndex = 0.0, options: BundleOptions = ...) -> BundleResult:
     """
     The self-calibration bundle adjustment (docs/sog.md §23): keyframe_poses (K, 6) [p; phi] T_cw; per observation its keyframe, point, uv_px (N, 2) and image_velocity_px_s (N, 2); per point its anchor keyframe and (a, b, rho) (P, 3). free_intrinsics: per camera parameter (None: all). The line delay (s/row) is held at line_delay_s, estimated from it (estimate_line_delay), or estimated with a Gaussian prior (mean_s, sigma_s). reference_row: v_ref of the rolling-shutter shift. Returns a BundleResult.
@@ -1206,6 +1210,6 @@ def standardisation_weight(line_delay_s: typing.SupportsFloat | typing.SupportsI
     """
 def unwrap_rotation_vectors(rotation_vectors: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 3]"]) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 3]"]:
     """
-    Paper eq. 22: make a (n, 3) sequence of rotation vectors continuous (2*pi per axis).
+    Paper eq. 22: make a (n, 3) sequence of rotation vectors continuous (2*pi per axis); NaN rows (unknown rotations) stay NaN.
     """
 __version__: str = '0.1.0'

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import checks
 from .errors import InputError
 
 
@@ -33,12 +34,16 @@ class Observations:
     image_size: tuple[int, int]
 
     def __post_init__(self) -> None:
-        self.frame_times_s = np.ascontiguousarray(self.frame_times_s, dtype=np.float64).reshape(-1)
-        self.frame_index = np.ascontiguousarray(self.frame_index, dtype=np.int64).reshape(-1)
-        self.point_id = np.ascontiguousarray(self.point_id, dtype=np.int64).reshape(-1)
-        self.uv = np.ascontiguousarray(self.uv, dtype=np.float64).reshape(-1, 2)
-        self.target_points = np.ascontiguousarray(self.target_points, dtype=np.float64).reshape(-1, 3)
-        self.image_size = (int(self.image_size[0]), int(self.image_size[1]))
+        # rscalib.checks: finite numbers of the right shapes, whole-number indices, an image size that
+        # can exist; each refusal names the field
+        self.frame_times_s = np.ascontiguousarray(
+            checks.finite_array(np.reshape(self.frame_times_s, -1), "observations: frame_times_s"))
+        self.frame_index = checks.index_array(self.frame_index, "observations: frame_index")
+        self.point_id = checks.index_array(self.point_id, "observations: point_id")
+        self.uv = np.ascontiguousarray(checks.finite_array(self.uv, "observations: uv", columns=2))
+        self.target_points = np.ascontiguousarray(
+            checks.finite_array(self.target_points, "observations: target_points", columns=3))
+        self.image_size = checks.image_size(self.image_size, "observations: image_size")
         m = len(self.uv)
         if len(self.frame_index) != m or len(self.point_id) != m:
             raise InputError("observations: frame_index, point_id and uv must have the same length")
@@ -47,9 +52,7 @@ class Observations:
         if m and (self.point_id.min() < 0 or self.point_id.max() >= len(self.target_points)):
             raise InputError("observations: point_id out of range of target_points")
         if np.any(np.diff(self.frame_times_s) <= 0):
-            raise InputError("observations: frame timestamps must be strictly increasing")
-        if not np.all(np.isfinite(self.uv)):
-            raise InputError("observations: uv contains NaN or infinity")
+            raise InputError("observations: frame timestamps (frame_times_s) must be strictly increasing")
 
     @property
     def num_frames(self) -> int:

@@ -1,7 +1,7 @@
 """The package's direction rules (docs/architecture.md), read from the source with `ast`.
 
     cli -> engines (linedelay, selfcalib, flicker, intrinsics) -> detection -> io -> base
-    base = _core, errors, observations, _progress, _version
+    base = _core, errors, checks, observations, _progress, _version
     sim may use io, base and engine constants; no production module imports sim (only cli may).
     batch sits beside cli: it may use cli (the commands it runs), io and base; only cli imports it.
 
@@ -25,7 +25,7 @@ import pytest
 REPOSITORY = Path(__file__).resolve().parents[2]
 PACKAGE = REPOSITORY / "python" / "rscalib"
 
-BASE = {"_core", "errors", "observations", "_progress", "_version", "verdict", "readout", "reference_cameras"}
+BASE = {"_core", "errors", "checks", "observations", "_progress", "_version", "verdict", "readout", "reference_cameras"}
 ENGINES = {"linedelay", "selfcalib", "flicker", "intrinsics"}
 # layer -> the layers it may import (its own layer always allowed)
 ALLOWED = {

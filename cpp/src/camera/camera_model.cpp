@@ -64,8 +64,10 @@ CameraModel::CameraModel(const std::string& model, const Eigen::VectorXd& params
     throw InputError(model + " takes " + std::to_string(expected) + " parameters" + alternatives +
                      ", got " + std::to_string(given));
   }
-  if (!params_.allFinite()) throw InputError("camera parameters must be finite");
-  if (width <= 0 || height <= 0) throw InputError("image width and height must be positive");
+  if (!params_.allFinite()) throw InputError("camera parameters (params) must be finite");
+  if (width <= 0 || height <= 0 || width > kMaxImageSidePx || height > kMaxImageSidePx)
+    throw InputError("image width and height must be 1 to " + std::to_string(kMaxImageSidePx) +
+                     " px, not " + std::to_string(width) + " x " + std::to_string(height));
   if (type_ == CameraModelType::kCiveraRadial) {
     if (!(params_[0] > 0.0)) throw InputError("civera-radial focal length must be positive");
     if (!(pixel_size_mm_[0] > 0.0 && pixel_size_mm_[1] > 0.0))

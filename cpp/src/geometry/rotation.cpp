@@ -17,6 +17,7 @@ Eigen::MatrixX3d UnwrapRotationVectors(const Eigen::MatrixX3d& rotation_vectors)
   for (Eigen::Index k = 1; k < out.rows(); ++k) {
     const Eigen::Vector3d previous = out.row(k - 1).transpose();
     const Eigen::Vector3d current = rotation_vectors.row(k).transpose();
+    if (!current.allFinite() || !previous.allFinite()) continue;  // an unknown rotation: as given
     const double angle = current.norm();
     Eigen::Vector3d axis;
     if (angle > 1e-12) {

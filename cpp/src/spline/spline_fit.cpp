@@ -14,6 +14,8 @@ CubicBSpline FitCubicBSpline(const std::vector<double>& knots, const Eigen::Vect
   const int dim = static_cast<int>(samples.cols());
   const int m = static_cast<int>(times.size());
   if (samples.rows() != m) throw InputError("spline fit: times and samples differ in length");
+  if (!samples.allFinite())
+    throw InputError("spline fit: samples must be finite (NaN or infinity given)");
   if (!options.sample_weight.empty() && static_cast<int>(options.sample_weight.size()) != m)
     throw InputError("spline fit: one sample weight per sample is needed");
   const auto& lambda_in = options.acceleration_weight;

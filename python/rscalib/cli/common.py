@@ -3,9 +3,10 @@ argparse converters of their options."""
 from __future__ import annotations
 
 import argparse
-import math
 import re
 from typing import Callable, Optional
+
+from .. import checks
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2       # a one-line reason on stderr, no traceback
@@ -36,9 +37,8 @@ def number(low: Optional[float] = None, high: Optional[float] = None, unit: str 
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-        too_low = low is not None and (value <= low if low_open else value < low)
-        if not math.isfinite(value) or too_low or (high is not None and value > high):
-            raise argparse.ArgumentTypeError(f"must be {_range_words(low, high, low_open)}{unit}, not {text}")
+        if checks.out_of_range(value, low, high, low_open):
+            raise argparse.ArgumentTypeError(f"must be {checks.range_words(low, high, low_open)}{unit}, not {text}")
         return value
     return convert
 
@@ -51,17 +51,9 @@ def whole(low: int, high: Optional[int] = None, unit: str = "", why: str = "") -
         except ValueError:
             raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
         if value < low or (high is not None and value > high):
-            raise argparse.ArgumentTypeError(f"must be {_range_words(low, high, False)}{unit}{why}, not {text}")
+            raise argparse.ArgumentTypeError(f"must be {checks.range_words(low, high)}{unit}{why}, not {text}")
         return value
     return convert
-
-
-def _range_words(low, high, low_open: bool) -> str:
-    if low is not None and high is not None:
-        return f"in {'(' if low_open else '['}{low:g}, {high:g}]"
-    if low is not None:
-        return f"{'>' if low_open else '>='} {low:g}"
-    return "finite" if high is None else f"<= {high:g}"
 
 
 def workers(text: str) -> int:
@@ -127,7 +119,8 @@ def line_delay(low: float, high: float, *, low_open: bool = False) -> Callable[[
     return convert
 
 
-LINE_DELAY = line_delay(-0.01, 0.01)         # 10 ms a row: a 100-row sensor read in a second
-ROWS = whole(1, 100_000, " rows")
-FRAMES = whole(1, 10_000_000, " frames")
+# the library's limits (rscalib.checks): the front doors and options refuse what these refuse
+LINE_DELAY = line_delay(-checks.MAX_ABS_LINE_DELAY_S, checks.MAX_ABS_LINE_DELAY_S)
+ROWS = whole(1, checks.MAX_ROWS, " rows")
+FRAMES = whole(1, checks.MAX_FRAMES, " frames")
 FOCAL_PX = number(0.0, 1e7, " px", low_open=True)

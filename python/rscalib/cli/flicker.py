@@ -17,6 +17,7 @@ import math
 import sys
 from pathlib import Path
 
+from .. import checks
 from ..errors import InputError
 from ..flicker.options import METHODS, REGIONS, FlickerOptions
 from ..readout import AUTO, ROW_DIRECTIONS, readout_direction
@@ -55,7 +56,7 @@ def add_parser(sub) -> None:
     p.add_argument("source", metavar="IMAGES_OR_VIDEO",
                    help="a video file, a folder of images (file-name order, optional timestamps.txt), or a single "
                         "image (the spectrum alone: a few band periods in the frame)")
-    p.add_argument("--frequency", type=number(0.0, 1e6, " Hz", low_open=True), required=True, metavar="HZ",
+    p.add_argument("--frequency", type=number(0.0, checks.MAX_FREQUENCY_HZ, " Hz", low_open=True), required=True, metavar="HZ",
                    help="the light's intensity frequency in Hz: twice the mains frequency for mains lamps (100 or "
                         "120), an LED's PWM frequency")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..detection.options import DetectOptions
+from ..detection.options import MAX_BLUR_PX, MAX_SUBPIX_WINDOW_PX, DetectOptions
 from ..intrinsics.options import MODELS, IntrinsicsOptions
 from .common import add_force, number, whole, workers
 
@@ -26,9 +26,9 @@ def add_parser(sub) -> None:
     p.add_argument("--max-views", type=whole(3, 10_000, " views"), default=None, metavar="N",
                    help=f"use at most N views, chosen sharp and well spread ({IntrinsicsOptions.max_views})")
     p.add_argument("--workers", type=workers, default=None, metavar="N", help="detection processes (all cores)")
-    p.add_argument("--max-blur-px", type=number(0.0, 100.0, " px", low_open=True), default=None, metavar="PX",
+    p.add_argument("--max-blur-px", type=number(0.0, MAX_BLUR_PX, " px", low_open=True), default=None, metavar="PX",
                    help=f"drop frames whose edges are wider than this ({DetectOptions.max_blur_px:g})")
-    p.add_argument("--subpix-window", type=whole(1, 50, " px"), default=None, metavar="PX",
+    p.add_argument("--subpix-window", type=whole(1, MAX_SUBPIX_WINDOW_PX, " px"), default=None, metavar="PX",
                    help="cornerSubPix half-window (default: a quarter of the grid step; OpenCV's sample uses 11)")
     p.add_argument("--no-cache", action="store_true", help="detect again even if cached detections exist")
     p.add_argument("--cache-dir", default=None, metavar="DIR", help="detection cache (~/.cache/rscalib/detections)")

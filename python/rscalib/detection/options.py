@@ -10,10 +10,15 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Optional, Union
 
-from ..errors import InputError
+from .. import checks
 
 # the fields that say how detection runs, not what it finds (not in the cache key)
 RUN_FIELDS = ("workers", "cache", "cache_dir")
+MAX_BLUR_PX = 100.0           # max_blur_px at most (the CLI's --max-blur-px)
+MAX_RESIDUAL = 10.0           # max_residual at most: grid steps
+MIN_SEARCH_SIDE_PX = 16       # max_search_side_px at least
+MAX_SUBPIX_WINDOW_PX = 50     # subpix_window_px at most (the CLI's --subpix-window)
+MAX_RUN_FRAMES = 1000         # full_detection_every at most: a worker holds a run's frames
 
 
 @dataclass(frozen=True)
@@ -34,13 +39,26 @@ class DetectOptions:
     cache_dir: Union[None, str, Path] = None   # None: the user's cache folder (detection.cache.default_cache_dir)
 
     def __post_init__(self) -> None:
-        if not self.max_blur_px > 0:
-            raise InputError(f"the largest edge width of a sharp frame must be positive, not {self.max_blur_px!r}")
-        if self.subpix_window_px is not None and not (isinstance(self.subpix_window_px, int)
-                                                      and self.subpix_window_px >= 1):
-            raise InputError(f"the corner refinement window must be at least 1 px, not {self.subpix_window_px!r}")
-        if self.workers is not None and not (isinstance(self.workers, int) and self.workers >= 1):
-            raise InputError(f"detection workers must be at least 1, not {self.workers!r}")
+        # the CLI's ranges (cli/intrinsics.py uses these limits), refused with the field's name;
+        # whole numbers given as floats (1e3) are kept as ints
+        def put(name, value):
+            object.__setattr__(self, name, value)
+
+        checks.number(self.max_blur_px, "max_blur_px (the largest edge width of a sharp frame)", 0.0, MAX_BLUR_PX,
+                      " px", low_open=True)
+        checks.number(self.max_residual, "max_residual", 0.0, MAX_RESIDUAL, " grid steps", low_open=True)
+        put("min_points", checks.whole(self.min_points, "min_points", 1))
+        put("max_search_side_px", checks.whole(self.max_search_side_px, "max_search_side_px", MIN_SEARCH_SIDE_PX,
+                                               checks.MAX_IMAGE_SIDE_PX, " px"))
+        if self.subpix_window_px is not None:
+            put("subpix_window_px", checks.whole(self.subpix_window_px, "subpix_window_px (the corner refinement "
+                                                 "window)", 1, MAX_SUBPIX_WINDOW_PX, " px"))
+        put("full_detection_every", checks.whole(self.full_detection_every, "full_detection_every", 1,
+                                                 MAX_RUN_FRAMES, " frames"))
+        if self.workers is not None:
+            put("workers", checks.whole(self.workers, "workers (detection processes)", 1))
+        if self.cache_dir is not None:
+            checks.path(self.cache_dir, "cache_dir")
 
     def fingerprint(self) -> str:
         """The settings that change the detections, as a stable string (the cache key)."""

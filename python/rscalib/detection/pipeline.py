@@ -20,6 +20,7 @@ from typing import Iterator, Optional, Sequence, Union
 import cv2
 import numpy as np
 
+from .. import checks
 from .._progress import Progress, ProgressArg
 from ..io.limits import bounded_workers, usable_cores
 from ..io.targets import Target, load_target
@@ -49,9 +50,13 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
     the usual `if __name__ == "__main__":` guard.
     options.cache: reuse / store the result under options.cache_dir (default_cache_dir()), keyed by
     the hash of the source's bytes, the target definition, the detector's settings and DETECTOR_VERSION."""
+    checks.source(source, "source")
+    checks.instance(target, "target", (str, os.PathLike, Target), "a target file or an rscalib.Target")
+    options = DetectOptions() if options is None else options
+    checks.instance(options, "options", (DetectOptions,), "an rscalib.DetectOptions or None")
+    checks.progress(progress)
     if not isinstance(target, Target):
         target = load_target(target)
-    options = options or DetectOptions()
     frames = open_source(source)
     workers = bounded_workers(frames, options.workers)  # frame sizes from the headers: refused or bounded before decoding
     started = time.perf_counter()

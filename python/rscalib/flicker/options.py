@@ -11,6 +11,7 @@ import numbers
 from dataclasses import dataclass, fields
 from typing import Optional, Union
 
+from .. import checks
 from ..errors import InputError
 from ..readout import AUTO, ROW_DIRECTIONS, readout_direction
 
@@ -51,14 +52,9 @@ class FlickerOptions:
         check_flicker_options(self)
 
 
-def _whole(value, name: str, low: int) -> int:
-    """value as an int >= low (a float with a whole value is one); InputError otherwise."""
-    if isinstance(value, bool) or not isinstance(value, (numbers.Integral, float)) or \
-            (isinstance(value, float) and not (math.isfinite(value) and value.is_integer())):
-        raise InputError(f"{name} must be a whole number, not {value!r}")
-    if int(value) < low:
-        raise InputError(f"{name} must be >= {low}, not {value!r}")
-    return int(value)
+def _whole(value, name: str, low: int, high: Optional[int] = None) -> int:
+    """value as an int in [low, high] (a float with a whole value is one); InputError otherwise."""
+    return checks.whole(value, name, low, high)
 
 
 def roi_box(roi) -> Optional[tuple]:
@@ -83,12 +79,12 @@ def check_flicker_options(options: FlickerOptions) -> None:
         object.__setattr__(options, name, value)
 
     if options.rows is not None:
-        put("rows", _whole(options.rows, "rows", 1))
+        put("rows", _whole(options.rows, "rows", 1, checks.MAX_ROWS))   # the CLI's --rows
     put("roi", roi_box(options.roi))
     if options.region not in REGIONS:
         raise InputError(f"unknown region choice {options.region!r} ({', '.join(REGIONS)})")
     if options.max_frames is not None:
-        put("max_frames", _whole(options.max_frames, "max frames", 1))
+        put("max_frames", _whole(options.max_frames, "max frames", 1, checks.MAX_FRAMES))
     if options.method not in METHODS:
         raise InputError(f"unknown method {options.method!r} ({', '.join(METHODS)})")
     if options.detrend not in DETRENDS:

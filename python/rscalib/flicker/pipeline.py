@@ -12,7 +12,6 @@ callable (done, total)).
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,8 +19,10 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
+from .. import checks
 from .._progress import ProgressArg
 from ..errors import InputError
+from ..io.video import FrameSource
 from ..verdict import Verdict
 from .engine import estimate_from_profiles
 from .judge import judge_flicker
@@ -94,6 +95,24 @@ def _described(source: Any) -> Any:
     return type(source).__name__
 
 
+def _check_source(source: Any) -> None:
+    """InputError naming `source` for what estimate_line_delay_flicker cannot read: another type, an
+    empty array, pixels that are not numbers or not finite."""
+    if isinstance(source, (RowProfiles, FrameSource)):
+        return
+    if isinstance(source, np.ndarray) or (isinstance(source, (list, tuple)) and source
+                                          and all(isinstance(item, np.ndarray) for item in source)):
+        for frame in [source] if isinstance(source, np.ndarray) else source:
+            if frame.size == 0:
+                raise InputError(f"source: an empty array of frames (shape {frame.shape})")
+            if frame.dtype.kind not in "uif":
+                raise InputError(f"source: frames must hold numbers (pixel values), not {frame.dtype}")
+            if frame.dtype.kind == "f" and not np.all(np.isfinite(frame)):
+                raise InputError("source: the frames hold NaN or infinite pixel values")
+        return
+    checks.source(source, "source", also_words="a FrameSource, arrays (N, H, W) or a list of them, or RowProfiles")
+
+
 def estimate_line_delay_flicker(source: Any, frequency_hz: float, options: Optional[FlickerOptions] = None, *,
                                 timestamps_s: Optional[Sequence[float]] = None,
                                 progress: ProgressArg = False) -> FlickerRun:
@@ -110,14 +129,18 @@ def estimate_line_delay_flicker(source: Any, frequency_hz: float, options: Optio
         folders with timestamps.txt carry theirs); without any, only the spectrum can be used.
     The result's .line_delay_s, .verdict and .write(out_dir) are what the command prints and writes."""
     started = time.perf_counter()
-    if not (isinstance(frequency_hz, (int, float, np.floating)) and not isinstance(frequency_hz, bool)
-            and math.isfinite(frequency_hz) and frequency_hz > 0):
-        raise InputError(f"flicker frequency must be a positive number of Hz (got {frequency_hz})")
+    # the CLI's --frequency range (rscalib.checks), the source and the times before any frame is read
+    checks.number(frequency_hz, "frequency_hz (the flicker frequency)", 0.0, checks.MAX_FREQUENCY_HZ, " Hz",
+                  low_open=True)
     if options is None:
         options = FlickerOptions()
     elif not isinstance(options, FlickerOptions):
         raise InputError(f"options must be a FlickerOptions, not {type(options).__name__} (frame timestamps go "
                          "in timestamps_s=)")
+    _check_source(source)
+    if timestamps_s is not None:
+        timestamps_s = checks.increasing_times(timestamps_s, "timestamps_s")
+    checks.progress(progress)
     profiles = source if isinstance(source, RowProfiles) else read_row_profiles(
         source, timestamps_s, roi=options.roi, max_frames=options.max_frames, progress=progress)
     if profiles.strips is not None and not profiles.region:

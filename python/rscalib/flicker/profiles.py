@@ -160,13 +160,14 @@ def _profiles(items, total, timestamps_s, roi, max_frames, progress, timestamps_
     if timestamps_s is not None:
         given = np.asarray(timestamps_s, dtype=np.float64).ravel()
         if len(given) < len(strips):
-            raise InputError(f"{len(given)} timestamps for {len(strips)} frames")
+            raise InputError(f"timestamps_s: {len(given)} times for {len(strips)} frames")
         times_s = given[:len(strips)]
         timestamps_source = "given"
     elif source_times:
         times_s = np.asarray(times, dtype=np.float64)
     if times_s is not None and (not np.all(np.isfinite(times_s)) or np.any(np.diff(times_s) <= 0)):
-        raise InputError("frame timestamps must be finite and strictly increasing")
+        raise InputError(f"{'timestamps_s' if timestamps_source == 'given' else 'the frame timestamps'} must be "
+                         "finite and strictly increasing")
     columns = np.column_stack([edges, np.append(edges[1:], block.shape[1])]) + cols_slice.start
     result = RowProfiles(values=np.zeros((len(strips), block.shape[0])),
                          rows_v=np.arange(size[1], dtype=np.float64)[rows_slice], times_s=times_s,

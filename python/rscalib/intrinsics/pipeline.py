@@ -9,10 +9,12 @@ verdict, and the files. `rscalib intrinsics`, `rscalib batch` and the experiment
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional, Sequence, Union
 
+from .. import checks
 from .._core import CameraModel
 from .._progress import ProgressArg
 from ..detection.pipeline import detect_video
@@ -66,7 +68,12 @@ def calibrate_intrinsics(source: Union[PathLike, Sequence[PathLike], DetectionRe
     """The intrinsics and distortion of the camera that took `source` (a video, an image folder, or a
     list of image files, of `target`: its file or a Target; or detections already made), with its
     verdict (`rscalib intrinsics`). options: IntrinsicsOptions (None: the defaults)."""
-    options = options or IntrinsicsOptions()
+    options = IntrinsicsOptions() if options is None else options
+    checks.source(source, "source", (DetectionResult,), "or a DetectionResult")
+    if target is not None:
+        checks.instance(target, "target", (str, os.PathLike, Target), "a target file or an rscalib.Target")
+    checks.instance(options, "options", (IntrinsicsOptions,), "an rscalib.IntrinsicsOptions or None")
+    checks.progress(progress)
     if isinstance(source, DetectionResult):
         detection, target_ = source, (target if isinstance(target, Target) else None)
         inputs = {"images": None, "target": None if target is None or isinstance(target, Target) else str(target)}

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
+from .. import checks
 from .._core import CameraModel
 from ..errors import InputError
 from .camera_formats.colmap import is_colmap, read_colmap, write_colmap_cameras
@@ -64,13 +65,16 @@ def load_camera(path) -> CameraFile:
     """Read a camera file of any format above; InputError (one line, naming the file and field)
     for a file or model rscalib cannot use. The file is read within safe_parse's limits (size,
     nesting, aliases, integer length) whatever it holds."""
+    path = checks.path(path, "path (the camera file)")
     try:
-        return _load_camera(Path(path))
+        return _load_camera(path)
     except InputError as error:
         raise InputError(one_line(str(error))) from None
 
 
 def _load_camera(path: Path) -> CameraFile:
+    if path.is_dir():
+        raise InputError(f"{shown(path)} is a folder, not a camera file")
     if not path.is_file():
         raise InputError(f"camera file not found: {shown(path)}")
     text = read_text(path, CAMERA_FILE_MAX_BYTES, "camera file", encoding="utf-8-sig")   # a BOM is not text
@@ -101,6 +105,14 @@ def write_camera(camera: CameraModel, path, format: str = "opencv", line_delay_s
                  **options) -> list[str]:
     """Write `camera` (with the line delay, if given and the format holds one) as `format`, one of
     CAMERA_FORMATS; `options` go to that writer. Returns notes on what the format changed."""
+    checks.instance(camera, "camera", (CameraModel,), "an rscalib.CameraModel")
+    target = checks.path(path, "path (the camera file to write)")
+    if target.is_dir():
+        raise InputError(f"path {shown(target)} is a folder: give the camera file's name")
+    if not target.parent.is_dir():
+        raise InputError(f"path {shown(target)}: its folder {shown(target.parent)} does not exist")
+    if line_delay_s is not None:
+        line_delay_s = checks.line_delay(line_delay_s, "line_delay_s")
     if format == "opencv":
         write_opencv_yaml(camera, path, line_delay_s, **options)
         return []

@@ -39,6 +39,7 @@ from typing import Any, Optional
 import cv2
 import numpy as np
 
+from .. import checks
 from ..errors import InputError
 from .camera_formats.common import finite_number
 from .safe_parse import load_yaml, one_line, read_text, shown
@@ -231,7 +232,9 @@ def unknown_keys(data: dict, target_type: str) -> list[str]:
 def load_target(path) -> Target:
     """Read a Kalibr-style target YAML; InputError with a one-line reason if it is unusable, a
     TargetFileWarning when it has keys that are not used (a typo would otherwise go unnoticed)."""
-    path = Path(path)
+    path = checks.path(path, "path (the target file)")
+    if path.is_dir():
+        raise InputError(f"{shown(path)} is a folder, not a target file")
     if not path.is_file():
         raise InputError(f"target file not found: {shown(path)}")
     # safe_parse: the size before reading, no aliases, a nesting and an integer-length limit

@@ -22,6 +22,7 @@ from typing import Iterator, Optional, Sequence, Union
 import cv2
 import numpy as np
 
+from .. import checks
 from ..errors import InputError
 from .limits import check_source_memory
 
@@ -276,7 +277,8 @@ def read_timestamps(path, count: int, notes: Optional[list] = None) -> np.ndarra
 
 def open_source(source: Union[str, Path, Sequence]) -> FrameSource:
     """A video file, an image folder, an image file, a glob pattern, or a list of image files."""
-    if isinstance(source, (str, Path)):
+    checks.source(source, "source")
+    if isinstance(source, (str, os.PathLike)):
         items = [source]
     else:
         items = list(source)

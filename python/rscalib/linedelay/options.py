@@ -10,6 +10,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Optional, Union
 
+from .. import checks
 from ..detection.options import DetectOptions
 from ..errors import InputError
 from ..readout import AUTO, READOUT_DIRECTIONS, readout_direction
@@ -70,8 +71,10 @@ class LocalizeOptions:
 def _check_common(options) -> None:
     if options.robust_loss not in ROBUST_LOSSES:
         raise InputError(f"unknown robust loss {options.robust_loss!r} ({', '.join(ROBUST_LOSSES)})")
-    if options.rows is not None and not (isinstance(options.rows, int) and options.rows > 0):
-        raise InputError(f"rows must be a positive whole number, not {options.rows!r}")
+    if options.rows is not None:
+        if not isinstance(options.rows, int) or isinstance(options.rows, bool):
+            raise InputError(f"rows must be a positive whole number, not {options.rows!r}")
+        checks.whole(options.rows, "rows", 1, checks.MAX_ROWS, " rows")   # the CLI's --rows
     if options.pixel_sigma_px is not None and not 1e-4 <= float(options.pixel_sigma_px) <= 100.0:
         raise InputError(f"the pixel sigma must be in [0.0001, 100] px, not {options.pixel_sigma_px!r}")
     if not (isinstance(options.max_rounds, int) and 1 <= options.max_rounds <= 100):

@@ -16,12 +16,14 @@ before the solve; `on_round(RoundRecord)` after each knot-adaptation round of th
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Optional, Union
 
 import numpy as np
 
+from .. import checks
 from .._core import CameraModel
 from .._progress import ProgressArg
 from ..detection import probe
@@ -194,7 +196,8 @@ def calibrate_video(video: VideoInput, target: Union[None, PathLike, Target] = N
     not needed); camera: its file (OpenCV, Kalibr, ROS, mrcal, COLMAP, Gyroflow) or a CameraModel;
     options: LineDelayOptions (None: the method's defaults). The result's .line_delay_s, .verdict and
     .write(out_dir) are what the command prints and writes."""
-    options = options or LineDelayOptions()
+    options = LineDelayOptions() if options is None else options
+    _check_arguments(video, target, camera, options, LineDelayOptions, progress, on_detection, on_round)
     camera_model, camera_path = _camera(camera)
     detection, video_path = _detections(video, target, camera_model, options, progress, on_detection)
     notes = list(detection.warnings)
@@ -350,12 +353,13 @@ def localize_video(video: VideoInput, target: Union[None, PathLike, Target] = No
     continuous-time rolling-shutter trajectory, paper §5.1, compared with per-frame GS PnP) or
     "gs-pnp" (pnp.pnp_trajectory: per-frame global-shutter poses at mid-readout; the line delay
     may be unknown). Other arguments as calibrate_video's."""
-    options = options or LocalizeOptions()
+    options = LocalizeOptions() if options is None else options
+    _check_arguments(video, target, camera, options, LocalizeOptions, progress, on_detection, on_round)
+    if line_delay_s is not None:
+        line_delay_s = checks.line_delay(line_delay_s, "line_delay_s")
     camera_model, camera_path = _camera(camera)
     if line_delay_s is None and camera_path is not None:
         line_delay_s = load_camera(camera_path).line_delay_s
-    if line_delay_s is not None and not math.isfinite(line_delay_s):
-        raise InputError("the line delay must be a finite number")
     if options.model == "rs-spline" and line_delay_s is None:
         raise InputError("no line delay: pass one (--line-delay, s/row) or a camera file that has one")
     detection, video_path = _detections(video, target, camera_model, options, progress, on_detection)
@@ -419,6 +423,23 @@ def check_target_matches(video: PathLike, target: Target, detection: DetectionRe
         if seen is None and not few:
             return
         raise InputError(probe.mismatch_message(target, seen))
+
+
+def _check_arguments(video, target, camera, options, options_class, progress, on_detection, on_round) -> None:
+    """The front doors' arguments (rscalib.checks), each refused with its name before any file is read."""
+    checks.instance(video, "video", (str, os.PathLike, DetectionResult, Observations),
+                    "a video file, an image folder, a DetectionResult or rscalib.Observations")
+    if not isinstance(video, (DetectionResult, Observations)):
+        checks.path(video, "video")
+    if target is not None:
+        checks.instance(target, "target", (str, os.PathLike, Target), "a target file or an rscalib.Target")
+    if camera is not None:
+        checks.instance(camera, "camera", (str, os.PathLike, CameraModel, CameraFile),
+                        "a camera file, an rscalib.CameraModel or a CameraFile")
+    checks.instance(options, "options", (options_class,), f"an rscalib.{options_class.__name__} or None")
+    checks.progress(progress)
+    checks.optional_callable(on_detection, "on_detection")
+    checks.optional_callable(on_round, "on_round")
 
 
 def _camera(camera: Optional[CameraInput]) -> tuple[CameraModel, Optional[Path]]:

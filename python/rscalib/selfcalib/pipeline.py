@@ -9,10 +9,12 @@ principal point and the radial distortion with 99 % bounds and a verdict, and th
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Optional, Union
 
+from .. import checks
 from .._core import CameraModel, SogBank, SogUpdateReport
 from .._progress import ProgressArg
 from ..errors import InputError
@@ -75,11 +77,16 @@ def self_calibrate(source: Union[PathLike, GrayFrames], options: Optional[SelfCa
     file or image folder of a natural scene, or rscalib.io.video.GrayFrames whose `frames` may be a
     callable returning a fresh iterable), with 99 % bounds and a verdict (`rscalib selfcalib`).
     options: SelfCalibOptions (None: the method's defaults)."""
-    options = options or SelfCalibOptions()
+    options = SelfCalibOptions() if options is None else options
+    checks.instance(source, "source", (str, os.PathLike, GrayFrames),
+                    "a video file, an image folder or rscalib.io.video.GrayFrames")
+    checks.instance(options, "options", (SelfCalibOptions,), "an rscalib.SelfCalibOptions or None")
+    checks.progress(progress)
+    checks.optional_callable(on_frame, "on_frame")
     if isinstance(source, GrayFrames):
         video, frames, name = source, source.frames, None
     else:
-        if not Path(source).exists():
+        if not checks.path(source, "source").exists():
             raise InputError(f"not found: {source}")
         video, name = read_gray_frames(source), str(source)
         first = [video.frames]

@@ -37,6 +37,7 @@ Only the previous frame is kept; per track a small patch and a descriptor. Frame
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from dataclasses import dataclass, field, fields
 from typing import Iterable, Optional
@@ -44,6 +45,7 @@ from typing import Iterable, Optional
 import cv2
 import numpy as np
 
+from .. import checks
 from .._progress import Progress, ProgressArg
 from ..errors import InputError
 from .options import TrackOptions
@@ -563,6 +565,8 @@ class FeatureTracker:
         if (image.shape[1], image.shape[0]) != self.image_size:
             raise InputError(f"frame {self._k + 1} is {image.shape[1]}x{image.shape[0]}, expected "
                              f"{self.image_size[0]}x{self.image_size[1]} (all frames must have one size)")
+        if isinstance(t_s, bool) or not isinstance(t_s, numbers.Real):
+            raise InputError(f"frame {self._k + 1}: the time must be a number of seconds, not {t_s!r}")
         if not math.isfinite(float(t_s)):
             raise InputError(f"frame {self._k + 1}: time {t_s} is not finite")
         if self._t_s and not float(t_s) > self._t_s[-1]:
@@ -886,19 +890,32 @@ def track_features(frames: Iterable[tuple[float, np.ndarray]], options: Optional
                    frame_count: Optional[int] = None, progress: ProgressArg = None) -> TrackSet:
     """Tracks through ``frames`` ((time s, grayscale uint8 image), all of one size, times
     increasing; at least two). ``frame_count``: for the progress bar only."""
+    checks.instance(options, "options", (TrackOptions, type(None)), "an rscalib.TrackOptions or None")
+    if frame_count is not None:
+        checks.whole(frame_count, "frame_count", 0, checks.MAX_FRAMES, " frames")
+    checks.progress(progress)
+    if isinstance(frames, (str, bytes)) or not hasattr(frames, "__iter__"):
+        raise InputError(f"frames must be an iterable of (time_s, image), not a {type(frames).__name__} (for a "
+                         "video or folder: rscalib.read_gray_frames(path).frames)")
     tracker: Optional[FeatureTracker] = None
     with Progress(progress, frame_count, "tracking") as bar:
         for k, item in enumerate(frames):
             try:
                 t_s, image = item
             except (TypeError, ValueError):
-                raise InputError(f"frame {k}: expected (time_s, image), got {type(item).__name__}") from None
+                raise InputError(f"frames: frame {k}: expected (time_s, image), got {type(item).__name__}") from None
             if tracker is None:
                 if image is None or np.ndim(image) < 2:
-                    raise InputError(f"frame {k}: expected a grayscale image")
+                    raise InputError(f"frames: frame {k}: expected a grayscale image")
                 tracker = FeatureTracker((int(np.shape(image)[1]), int(np.shape(image)[0])), options)
-            tracker.add_frame(t_s, image)
+            try:
+                tracker.add_frame(t_s, image)
+            except InputError as error:
+                raise InputError(f"frames: {error}") from None
             bar.update(k + 1)
     if tracker is None:
-        raise InputError("tracking needs at least 2 frames, got none")
-    return tracker.result()
+        raise InputError("frames: tracking needs at least 2 frames, got none")
+    try:
+        return tracker.result()
+    except InputError as error:
+        raise InputError(f"frames: {error}") from None

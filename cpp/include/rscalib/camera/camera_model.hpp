@@ -37,6 +37,8 @@ bool ProjectPoint(CameraModelType type, const T* params, const double* pixel_siz
 class CameraModel {
  public:
   static constexpr int kMaxParams = 9;
+  // An image side at most (a camera file's limit, rscalib.checks.MAX_IMAGE_SIDE_PX).
+  static constexpr int kMaxImageSidePx = 100000;
 
   // pinhole-radtan accepts 4 (no distortion), 5, 8 or 9 values in OpenCV order
   // [fx, fy, cx, cy, k1, k2, p1, p2, k3]; missing coefficients are zero. civera-radial

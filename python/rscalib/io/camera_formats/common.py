@@ -8,6 +8,7 @@ from typing import Optional
 import numpy as np
 
 from ..._core import CameraModel
+from ...checks import MAX_ABS_LINE_DELAY_S, MAX_IMAGE_SIDE_PX
 from ...errors import InputError
 
 # OpenCV's pixel convention is rscalib's (docs/conventions.md); COLMAP puts pixel centres at +0.5.
@@ -39,9 +40,7 @@ def opencv_matrices(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
 
 # What a camera file may say: image sides up to 100 000 px, focal lengths up to 10^7 px, the
 # principal point within one image size of the image, |line delay| up to 10 ms per row.
-MAX_IMAGE_SIDE_PX = 100_000
 MAX_FOCAL_PX = 1e7
-MAX_ABS_LINE_DELAY_S = 0.01
 
 
 def finite_number(value, field: str) -> float:
