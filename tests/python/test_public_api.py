@@ -39,12 +39,34 @@ def test_every_public_name_resolves():
     ("DetectOptions", "workers", -2), ("TrackOptions", "target_tracks", -5), ("TrackOptions", "reid_ratio", 1.5),
     ("TrackOptions", "fb_max_px", float("inf")), ("TrackOptions", "ransac_method", "lmeds"),
     ("TrackOptions", "anchor", "yes"),
+    ("SelfCalibOptions", "pixel_size_mm", "0.007"), ("SelfCalibOptions", "ransac_hypotheses", -1),
+    ("SelfCalibOptions", "ransac_hypotheses", 2.5), ("SelfCalibOptions", "restarts", "no"),
+    ("SelfCalibOptions", "f_range_px", (100.0,)), ("SelfCalibOptions", "f_range_px", ("a", "b")),
+    ("SelfCalibOptions", "line_delay_from", 42), ("SelfCalibOptions", "sprt_alpha", "0.1"),
+    ("SelfCalibOptions", "robust_loss_scale_px", None), ("SelfCalibOptions", "determined_within", [0.02]),
+    ("FrontEndOptions", "patch_half_px", 0), ("FrontEndOptions", "ncc_threshold", 1.5),
+    ("FrontEndOptions", "min_visible", -1), ("FrontEndOptions", "max_search_half_px", float("nan")),
+    ("FrontEndOptions", "max_warp_scale", 0.5), ("FrontEndOptions", "corner_quality", "high"),
 ])
 def test_options_refuse_values_that_mean_nothing(cls, field, value):
     """The public options classes check their values as the CLI's converters do: InputError, one line."""
     with pytest.raises(rscalib.InputError) as error:
-        getattr(rscalib, cls)(**{field: value})
+        _options_class(cls)(**{field: value})
     assert "\n" not in str(error.value)
+
+
+def _options_class(name):
+    if name == "FrontEndOptions":   # not on the package face: SelfCalibOptions(front_end=...)
+        from rscalib.selfcalib.options import FrontEndOptions
+        return FrontEndOptions
+    return getattr(rscalib, name)
+
+
+def test_selfcalib_options_f0_and_sigma_are_checked_for_the_single_baseline():
+    for bad in (-5.0, float("nan"), "500"):
+        with pytest.raises(rscalib.InputError, match="f0_px"):
+            rscalib.SelfCalibOptions(baseline="single", f0_px=bad)
+    assert rscalib.SelfCalibOptions(baseline="single", f0_px=500.0, f_sigma_px=50.0).f0_px == 500.0
 
 
 def test_track_options_defaults_are_valid():

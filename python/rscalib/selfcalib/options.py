@@ -6,9 +6,11 @@ door :func:`rscalib.self_calibrate` takes the same object; the engine reads the 
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, replace
 from typing import Optional
 
+from .. import checks
 from ..errors import InputError
 from ..reference_cameras import PAPER_PIXEL_SIZE_MM
 
@@ -46,6 +48,16 @@ class FrontEndOptions:
     warp_model: str = "affine"        # "tracked": "affine" or "homography" (perspective across the patch)
 
     def __post_init__(self) -> None:
+        for name in ("patch_half_px", "refine_half_px"):
+            checks.whole(getattr(self, name), f"front_end.{name}", 1, 100, " px")
+        for name in ("min_visible", "max_new_per_frame"):
+            checks.whole(getattr(self, name), f"front_end.{name}", 1, 100_000)
+        for name in ("ncc_threshold", "corner_quality"):
+            checks.number(getattr(self, name), f"front_end.{name}", 0.0, 1.0, low_open=True)
+        for name in ("min_separation_px", "max_search_half_px", "max_refine_shift_px"):
+            checks.number(getattr(self, name), f"front_end.{name}", 0.0, 1e5, " px", low_open=True)
+        for name in ("max_warp_change", "max_warp_scale"):
+            checks.number(getattr(self, name), f"front_end.{name}", 1.0, 1e3)
         if self.subpixel not in SUBPIXEL_MODES:
             raise InputError(f"front_end.subpixel must be one of {', '.join(SUBPIXEL_MODES)}, not {self.subpixel!r}")
         if self.warp_model not in WARP_MODELS:
@@ -206,6 +218,28 @@ class SelfCalibOptions:
     #                                             pose block is dense in the covariance
 
     def __post_init__(self) -> None:
+        # types first (text, bools, lists): the range checks below then read numbers
+        checks.number(self.pixel_size_mm, "pixel_size_mm")
+        if self.line_delay_s is not None:
+            checks.number(self.line_delay_s, "line_delay_s")
+        checks.number(self.determined_within, "determined_within")
+        for name in ("f0_px", "f_sigma_px"):
+            if getattr(self, name) is not None:
+                checks.number(getattr(self, name), name, 0.0, 1e7, " px", low_open=True)
+        for name in ("sprt_alpha", "sprt_beta", "robust_loss_scale_px"):
+            checks.number(getattr(self, name), name)
+        checks.whole(self.ransac_hypotheses, "ransac_hypotheses", 0, 100_000)   # 0: no 1-point RANSAC
+        if not isinstance(self.restarts, bool):
+            raise InputError(f"restarts must be True or False, not {self.restarts!r}")
+        if self.f_range_px is not None:
+            pair = self.f_range_px
+            if not (isinstance(pair, (tuple, list)) and len(pair) == 2):
+                raise InputError(f"f_range_px must be (low, high) in px, not {pair!r}")
+            for value in pair:
+                checks.number(value, "f_range_px")
+        if self.line_delay_from is not None:
+            checks.instance(self.line_delay_from, "line_delay_from", (str, os.PathLike),
+                            "the path of an `rscalib linedelay` result.json")
         if not (math.isfinite(self.pixel_size_mm) and 1e-4 <= self.pixel_size_mm <= 1.0):
             raise InputError(f"the pixel size must be in [0.0001, 1] mm, not {self.pixel_size_mm!r}")
         if self.max_frames is not None and not (isinstance(self.max_frames, int) and self.max_frames >= 2):
