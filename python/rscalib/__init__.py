@@ -18,11 +18,20 @@ first use, so ``import rscalib`` does not load the engines, OpenCV or matplotlib
 """
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+import os
 
-from ._version import __version__
-from .errors import InputError
+# One BLAS thread, set before NumPy, OpenCV or the core load OpenBLAS (the first import of a CLI
+# process is this one): a sum split over threads runs in another order, and `rscalib intrinsics`'
+# sigmas changed in their last bits between the command and a batch job, whose jobs run with every
+# thread pool at one (issue 33). A value the user set is kept; in a process that loaded NumPy first
+# it has no effect (docs/reliability.md: determinism).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import importlib  # noqa: E402
+from typing import TYPE_CHECKING, Any  # noqa: E402
+
+from ._version import __version__  # noqa: E402
+from .errors import InputError  # noqa: E402
 
 # public name -> module that defines it. First the front doors (one per job: the CLI, batch and the
 # experiments call the same), their options and results; then the building blocks.

@@ -17,8 +17,8 @@ CLI = [sys.executable, "-m", "rscalib.cli"]
 VOLATILE = re.compile(r"(_time_s|elapsed_s|frames_per_s|\.provenance\.(command_line|created_utc))$")
 
 
-def run(*args, ok=(0, 3)):
-    proc = subprocess.run(CLI + [str(a) for a in args], capture_output=True, text=True, timeout=600)
+def run(*args, ok=(0, 3), env=None):
+    proc = subprocess.run(CLI + [str(a) for a in args], capture_output=True, text=True, timeout=600, env=env)
     assert proc.returncode in ok, proc.stderr
     return proc
 
@@ -76,6 +76,27 @@ def test_intrinsics_identical_across_worker_counts(renders, tmp_path):
         run("intrinsics", stills / "frames", "--target", stills / "target.yaml", "--out", tmp_path / f"w{workers}",
             "--workers", workers, "--no-cache", "--quiet", ok=(0, 3, 4))
     assert_identical(tmp_path / "w1", tmp_path / "w2", "parameters.fx")
+
+
+@pytest.mark.parametrize("command", ["intrinsics", "selfcalib", "linedelay"])
+def test_a_batch_jobs_thread_caps_change_no_number(renders, tmp_path, command):
+    """A batch job runs its command with every thread pool capped at one (batch.runner.JOB_THREAD_ENV);
+    the single command a user types runs with the machine's defaults. Both must give the same numbers
+    (issue 33: intrinsics differed in 45 of 103 numbers, selfcalib in 66 of 5582)."""
+    import os
+
+    from rscalib.batch.runner import JOB_THREAD_ENV
+
+    argv = {"intrinsics": ["intrinsics", renders / "stills" / "frames", "--target", renders / "stills" / "target.yaml",
+                           "--no-cache"],
+            "selfcalib": ["selfcalib", renders / "scene", "--pixel-size-mm", "0.0112", "--no-restarts"],
+            "linedelay": ["linedelay", renders / "video" / "video.avi", "--target", renders / "video" / "target.yaml",
+                          "--camera", renders / "video" / "camera.yaml", "--no-cache"]}[command]
+    default_env = {k: v for k, v in os.environ.items() if k not in JOB_THREAD_ENV}
+    run(*argv, "--out", tmp_path / "single", "--quiet", ok=(0, 3, 4), env=default_env)
+    run(*argv, "--out", tmp_path / "job", "--quiet", ok=(0, 3, 4), env={**default_env, **JOB_THREAD_ENV})
+    headline = {"intrinsics": "parameters.fx", "selfcalib": "f", "linedelay": "line_delay_s"}[command]
+    assert_identical(tmp_path / "single", tmp_path / "job", headline)
 
 
 def test_flicker_identical_across_runs(renders, tmp_path):
