@@ -1,4 +1,4 @@
-// Bindings: rotation vectors.
+// Bindings: rotation vectors; the detectors' local-homography check.
 #include <cmath>
 #include <string>
 
@@ -7,6 +7,7 @@
 
 #include "bindings.hpp"
 #include "rscalib/core/error.hpp"
+#include "rscalib/geometry/local_homography.hpp"
 #include "rscalib/geometry/rotation.hpp"
 
 namespace rscalib::python {
@@ -70,6 +71,18 @@ void BindGeometry(py::module_& m) {
       },
       py::arg("rotation"),
       "phi (angle in [0, pi]) of a rotation matrix; NaN (an unknown rotation) gives NaN.");
+  m.def(
+      "local_homography_residual",
+      [](const Eigen::MatrixX2d& target_xy, const Eigen::MatrixX2d& uv,
+         const Eigen::MatrixXi& nearest) {
+        py::gil_scoped_release release;
+        return geometry::LocalHomographyResidual(target_xy, uv, nearest);
+      },
+      py::arg("target_xy"), py::arg("uv"), py::arg("nearest"),
+      "For each point (rows of target_xy and uv, (n, 2)), the distance in grid steps from its "
+      "pixel "
+      "to the homography of its k nearest target neighbours (nearest, (n, k) row indices), fitted "
+      "by the normalised DLT; NaN where it cannot be fitted.");
 }
 
 }  // namespace rscalib::python

@@ -30,7 +30,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import importlib  # noqa: E402
 from typing import TYPE_CHECKING, Any  # noqa: E402
 
-from ._version import __version__  # noqa: E402
 from .errors import InputError  # noqa: E402
 
 # public name -> module that defines it. First the front doors (one per job: the CLI, batch and the
@@ -81,9 +80,11 @@ _EXPORTS = {
     "rotation_matrix_to_vector": "._core",
     "rotation_vector_to_matrix": "._core",
     "unwrap_rotation_vectors": "._core",
+    # the installed version (its metadata lookup costs ~70 ms: not paid by detection workers)
+    "__version__": "._version",
 }
 
-__all__ = sorted(_EXPORTS) + ["InputError", "__version__"]
+__all__ = sorted(_EXPORTS) + ["InputError"]
 
 
 def __getattr__(name: str) -> Any:

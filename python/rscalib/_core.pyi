@@ -6,7 +6,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BSpline', 'BundleOptions', 'BundleResult', 'CameraModel', 'InputError', 'LinearInterpOptions', 'LinearInterpSummary', 'RsSolveSummary', 'RsSolverOptions', 'SogBank', 'SogOptions', 'SogUpdateReport', 'error_noise_map', 'evaluate_line_delay', 'evaluate_rs_cost', 'fit_bspline', 'linear_interp_pose_state', 'poses_at', 'rotation_matrix_to_vector', 'rotation_vector_to_matrix', 'solve_bundle', 'solve_line_delay', 'solve_line_delay_linear', 'standardisation_weight', 'unwrap_rotation_vectors']
+__all__: list[str] = ['BSpline', 'BundleOptions', 'BundleResult', 'CameraModel', 'InputError', 'LinearInterpOptions', 'LinearInterpSummary', 'RsSolveSummary', 'RsSolverOptions', 'SogBank', 'SogOptions', 'SogUpdateReport', 'error_noise_map', 'evaluate_line_delay', 'evaluate_rs_cost', 'fit_bspline', 'linear_interp_pose_state', 'local_homography_residual', 'poses_at', 'rotation_matrix_to_vector', 'rotation_vector_to_matrix', 'solve_bundle', 'solve_line_delay', 'solve_line_delay_linear', 'standardisation_weight', 'unwrap_rotation_vectors']
 class InputError(ValueError):
     pass
 class BSpline:
@@ -1179,6 +1179,10 @@ def fit_bspline(knots: collections.abc.Sequence[typing.SupportsFloat | typing.Su
 def linear_interp_pose_state(pose_a: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[6, 1]"], pose_b: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[6, 1]"], s: typing.SupportsFloat | typing.SupportsIndex) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[6, 1]"]:
     """
     T_cw [p; phi] at parameter s between poses a and b: centre linear, rotation SLERP.
+    """
+def local_homography_residual(target_xy: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], uv: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], nearest: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, n]"]) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+    """
+    For each point (rows of target_xy and uv, (n, 2)), the distance in grid steps from its pixel to the homography of its k nearest target neighbours (nearest, (n, k) row indices), fitted by the normalised DLT; NaN where it cannot be fitted.
     """
 def poses_at(pose_spline: BSpline, times: typing.Any) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64]]:
     """

@@ -247,18 +247,27 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
     block_observations.clear();
     if (intrinsics) intrinsics->AddTo(problem);
     // Plain least squares with the analytic Jacobian: one residual block per run of observations
-    // with the same frame time and span (RsReprojectionGroupCost), the same sum of squares.
-    const bool group = options.analytic_jacobian && !loss && !intrinsics;
+    // with the same frame time and span (RsReprojectionGroupCost, with the intrinsics
+    // RsReprojectionIntrinsicsGroupCost), the same sum of squares. Under a robust loss each
+    // observation is its own block (the loss applies to a whole block).
+    const bool analytic = options.analytic_jacobian;
+    const bool group = analytic && !loss;
     std::vector<AnalyticReprojectionTerm> members;
+    std::vector<AnalyticIntrinsicsTerm> intrinsics_members;
     std::vector<int> member_observations;
     const auto flush_group = [&](int span) {
-      if (members.empty()) return;
+      if (members.empty() && intrinsics_members.empty()) return;
       double* c0 = control + 6 * (span - 3);
       const ceres::ResidualBlockId id =
-          problem->AddResidualBlock(new RsReprojectionGroupCost(std::move(members)), nullptr, c0,
-                                    c0 + 6, c0 + 12, c0 + 18, line_delay_s);
+          intrinsics
+              ? problem->AddResidualBlock(
+                    new RsReprojectionIntrinsicsGroupCost(std::move(intrinsics_members)), loss, c0,
+                    c0 + 6, c0 + 12, c0 + 18, line_delay_s, intrinsics->value.data())
+              : problem->AddResidualBlock(new RsReprojectionGroupCost(std::move(members)), loss, c0,
+                                          c0 + 6, c0 + 12, c0 + 18, line_delay_s);
       if (options.line_delay_score) block_observations[id] = std::move(member_observations);
       members.clear();
+      intrinsics_members.clear();
       member_observations.clear();
     };
     int group_span = -1;
@@ -272,7 +281,18 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
                                  observations.point_w(m, 2)};
       double* c0 = control + 6 * (a.span - 3);
       const double frame_offset_s = observations.frame_time_s[m] - basis.span_start;
-      if (group) {
+      if (intrinsics && analytic) {
+        if (!group || a.span != group_span || observations.frame_time_s[m] != group_frame_time_s) {
+          flush_group(group_span);
+          group_span = a.span;
+          group_frame_time_s = observations.frame_time_s[m];
+        }
+        intrinsics_members.emplace_back(basis, camera_model, frame_offset_s, uv, point_w,
+                                        a.error.sqrt_information);
+        if (options.line_delay_score) member_observations.push_back(static_cast<int>(m));
+        continue;
+      }
+      if (group && !intrinsics) {
         if (a.span != group_span || observations.frame_time_s[m] != group_frame_time_s) {
           flush_group(group_span);
           group_span = a.span;

@@ -96,4 +96,90 @@ bool RsReprojectionGroupCost::Evaluate(double const* const* parameters, double* 
   return true;
 }
 
+AnalyticIntrinsicsTerm::AnalyticIntrinsicsTerm(const spline::SpanPowerBasis& basis_in,
+                                               const CameraModelOf& camera_in,
+                                               double frame_time_minus_span_start_s,
+                                               const double* uv_measured, const double* point_w,
+                                               const Eigen::Matrix2d& sqrt_information)
+    : basis(basis_in),
+      camera(camera_in),
+      frame_offset_s(frame_time_minus_span_start_s),
+      measurement(uv_measured, point_w, sqrt_information) {
+  basis.span_start = 0.0;
+}
+
+bool AnalyticIntrinsicsTerm::Evaluate(double const* const* parameters, double* residuals,
+                                      double** jacobians) const {
+  const double v = measurement.uv[1];
+  const double u = frame_offset_s + v * parameters[4][0];
+  double weights[3][4];
+  spline::EvaluateSpanBasis(basis, u, jacobians ? 1 : 0, weights);
+  double state[kStateDim];
+  spline::CombineControlPoints(weights[0], parameters, kStateDim, state);
+  const double* theta = parameters[5];
+  if (!jacobians) {
+    double point_c[3], uv[2];
+    geometry::TransformWorldToCamera(state, measurement.point_w, point_c);
+    if (!camera.Project(theta, point_c, uv)) return false;
+    measurement.Residual(uv, residuals);
+    return true;
+  }
+
+  constexpr int kWidth = kStateDim + kIntrinsicsBlockSize;
+  using Jet = ceres::Jet<double, kWidth>;
+  Jet state_jet[kStateDim], theta_jet[kIntrinsicsBlockSize];
+  for (int k = 0; k < kStateDim; ++k) state_jet[k] = Jet(state[k], k);
+  for (int k = 0; k < kIntrinsicsBlockSize; ++k) theta_jet[k] = Jet(theta[k], kStateDim + k);
+  Jet point_c[3], uv[2], residual_jet[2];
+  geometry::TransformWorldToCamera(state_jet, measurement.point_w, point_c);
+  if (!camera.Project(theta_jet, point_c, uv)) return false;
+  measurement.Residual(uv, residual_jet);
+  residuals[0] = residual_jet[0].a;
+  residuals[1] = residual_jet[1].a;
+  Eigen::Matrix<double, 2, kStateDim> dr_dstate;
+  for (int r = 0; r < 2; ++r) dr_dstate.row(r) = residual_jet[r].v.head<kStateDim>().transpose();
+  for (int j = 0; j < 4; ++j) {
+    if (!jacobians[j]) continue;
+    Eigen::Map<Eigen::Matrix<double, 2, kStateDim, Eigen::RowMajor>> jacobian(jacobians[j]);
+    jacobian = weights[0][j] * dr_dstate;
+  }
+  if (jacobians[4]) {
+    double state_rate[kStateDim];  // dx/du
+    spline::CombineControlPoints(weights[1], parameters, kStateDim, state_rate);
+    const Eigen::Vector2d dr_dd =
+        dr_dstate * (v * Eigen::Map<const Eigen::Matrix<double, kStateDim, 1>>(state_rate));
+    jacobians[4][0] = dr_dd[0];
+    jacobians[4][1] = dr_dd[1];
+  }
+  if (jacobians[5]) {
+    Eigen::Map<Eigen::Matrix<double, 2, kIntrinsicsBlockSize, Eigen::RowMajor>> dr_dtheta(
+        jacobians[5]);
+    for (int r = 0; r < 2; ++r)
+      dr_dtheta.row(r) = residual_jet[r].v.tail<kIntrinsicsBlockSize>().transpose();
+  }
+  return true;
+}
+
+RsReprojectionIntrinsicsGroupCost::RsReprojectionIntrinsicsGroupCost(
+    std::vector<AnalyticIntrinsicsTerm> terms)
+    : terms_(std::move(terms)) {
+  set_num_residuals(2 * static_cast<int>(terms_.size()));
+  *mutable_parameter_block_sizes() = {6, 6, 6, 6, 1, kIntrinsicsBlockSize};
+}
+
+bool RsReprojectionIntrinsicsGroupCost::Evaluate(double const* const* parameters, double* residuals,
+                                                 double** jacobians) const {
+  constexpr int kBlockSizes[6] = {6, 6, 6, 6, 1, kIntrinsicsBlockSize};
+  double* member_jacobians[6];
+  for (size_t m = 0; m < terms_.size(); ++m) {
+    if (jacobians) {
+      for (int b = 0; b < 6; ++b)
+        member_jacobians[b] = jacobians[b] ? jacobians[b] + 2 * m * kBlockSizes[b] : nullptr;
+    }
+    if (!terms_[m].Evaluate(parameters, residuals + 2 * m, jacobians ? member_jacobians : nullptr))
+      return false;
+  }
+  return true;
+}
+
 }  // namespace rscalib::rs

@@ -30,6 +30,7 @@ Other target types are detected from scratch in every frame (docs/benchmarks.md,
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 from typing import Optional, Sequence
 
@@ -108,10 +109,11 @@ class CheckerboardTracker:
 
     def detect(self, gray: np.ndarray, index: int) -> FrameDetection:
         predicted = self.extrapolate(index)
-        if predicted is not None and self._inside(predicted, gray.shape):
+        step = _min_step(predicted.reshape(*self.grid_shape, 2)) if predicted is not None else float("nan")
+        if predicted is not None and self._inside(predicted, gray.shape, step):
             # a wide first pass pulls the prediction (a few px off) onto the corners; the
             # detector's own refinement then runs exactly as after a full detection
-            coarse = _wide_subpix(gray, predicted, self.grid_shape)
+            coarse = _wide_subpix(gray, predicted, self.grid_shape, step)
             found = self._refiner.refine_checkerboard(gray, coarse, numbered=True)
             if found.accepted and self._verified(gray, predicted, found.uv):
                 self.counts["tracked"] += 1
@@ -119,7 +121,7 @@ class CheckerboardTracker:
                 return found
             self.counts["track_rejected"] += 1
         board = None
-        if predicted is not None and not self._inside(predicted, gray.shape):
+        if predicted is not None and not self._inside(predicted, gray.shape, step):
             board = self._partial_board(gray, predicted)
             if board is not None and _beyond_border(board, gray.shape).max() >= OUTSIDE_STEPS * _min_step(
                     board.reshape(*self.grid_shape, 2)):
@@ -194,10 +196,10 @@ class CheckerboardTracker:
             return None
         return cv2.perspectiveTransform(xy.reshape(-1, 1, 2), board).reshape(-1, 2)
 
-    def _inside(self, uv: np.ndarray, shape: tuple) -> bool:
+    def _inside(self, uv: np.ndarray, shape: tuple, step: Optional[float] = None) -> bool:
         """Whether every corner lies 0.4 grid steps (and 2 px) inside the image: the refinement
-        windows and the saddle samples stay on the image."""
-        margin = 2.0 + WIDE_WINDOW_STEPS * _min_step(uv.reshape(*self.grid_shape, 2))
+        windows and the saddle samples stay on the image (step: uv's smallest grid step, if known)."""
+        margin = 2.0 + WIDE_WINDOW_STEPS * (_min_step(uv.reshape(*self.grid_shape, 2)) if step is None else step)
         height, width = shape[:2]
         if not np.all(np.isfinite(uv)):
             return False
@@ -208,8 +210,9 @@ class CheckerboardTracker:
         rows, cols = self.grid_shape
         grid = uv.reshape(rows, cols, 2)
         # refined corners may be renumbered (ids): compare each with its nearest prediction
-        shift = np.linalg.norm(uv[:, None, :] - predicted[None, :, :], axis=2).min(axis=1)
-        if shift.max() > MAX_SHIFT_STEPS * _min_step(grid):
+        difference = uv[:, None, :] - predicted[None, :, :]
+        shift_sq = np.einsum("ijk,ijk->ij", difference, difference).min(axis=1)
+        if np.sqrt(shift_sq.max()) > MAX_SHIFT_STEPS * _min_step(grid):
             return False
         return corners_are_saddles(gray, grid)
 
@@ -226,20 +229,53 @@ def corners_are_saddles(gray: np.ndarray, grid: np.ndarray, mask: Optional[np.nd
     one diagonal pair is brighter than the other by a clear gap, and which pair is bright
     alternates from corner to corner. A corner of a single square at the board's edge (three
     bright quadrants) or an occluded corner fails."""
-    along_cols, along_rows = np.gradient(grid, axis=1), np.gradient(grid, axis=0)
-    offsets = [along_cols + along_rows, -(along_cols + along_rows), along_cols - along_rows, along_rows - along_cols]
-    points = np.stack([grid + 0.3 * o for o in offsets], axis=2).reshape(-1, 4, 2).astype(np.float32)
-    even = (np.add.outer(np.arange(grid.shape[0]), np.arange(grid.shape[1])) % 2 == 0).ravel()
+    along_cols, along_rows = _gradient(grid, 1), _gradient(grid, 0)
+    diagonal, anti = along_cols + along_rows, along_cols - along_rows
+    points = np.stack([grid + 0.3 * diagonal, grid - 0.3 * diagonal, grid + 0.3 * anti, grid - 0.3 * anti],
+                      axis=2).reshape(-1, 4, 2).astype(np.float32)
+    even = _even_corners(grid.shape[:2])
     if mask is not None:
         points, even = points[mask.ravel()], even[mask.ravel()]
     values = cv2.remap(gray, points[..., 0], points[..., 1], cv2.INTER_LINEAR,
                        borderMode=cv2.BORDER_REPLICATE).astype(np.float64)  # (n, 4)
     diagonal_bright = values[:, :2].min(1) - values[:, 2:].max(1)   # gap if the diagonal pair is bright
     anti_bright = values[:, 2:].min(1) - values[:, :2].max(1)
-    gap = max(np.where(even, diagonal_bright, anti_bright), np.where(even, anti_bright, diagonal_bright),
-              key=np.median)  # the board's colour convention is the one most corners follow
-    contrast = float(np.median(values.max(1) - values.min(1)))
+    # the board's colour convention is the one most corners follow
+    convention = np.where(even, diagonal_bright, anti_bright)
+    other = np.where(even, anti_bright, diagonal_bright)
+    gap = convention if _median(convention) >= _median(other) else other
+    contrast = _median(values.max(1) - values.min(1))
     return contrast >= MIN_CONTRAST and float(gap.min()) >= MIN_SADDLE_GAP * contrast
+
+
+def _gradient(grid: np.ndarray, axis: int) -> np.ndarray:
+    """np.gradient(grid, axis=axis) of a (rows, cols, 2) grid (unit spacing, first-order ends), the
+    same numbers without its per-call overhead (this runs on every tracked frame)."""
+    if grid.shape[axis] < 2:
+        return np.gradient(grid, axis=axis)
+    g = grid if axis == 0 else grid.transpose(1, 0, 2)
+    out = np.empty(g.shape)
+    out[1:-1] = (g[2:] - g[:-2]) / 2.0
+    out[0] = g[1] - g[0]
+    out[-1] = g[-1] - g[-2]
+    return out if axis == 0 else out.transpose(1, 0, 2)
+
+
+def _median(values: np.ndarray) -> float:
+    """np.median of a 1-D array (the mean of the middle two of an even count), without its overhead."""
+    n = len(values)
+    half = n // 2
+    if n % 2:
+        return float(np.partition(values, half)[half])
+    part = np.partition(values, (half - 1, half))
+    return float((part[half - 1] + part[half]) / 2.0)
+
+
+@functools.lru_cache(maxsize=16)
+def _even_corners(shape: tuple) -> np.ndarray:
+    even = (np.add.outer(np.arange(shape[0]), np.arange(shape[1])) % 2 == 0).ravel()
+    even.flags.writeable = False
+    return even
 
 
 def _wide_subpix(gray: np.ndarray, uv: np.ndarray, grid_shape: tuple, step: Optional[float] = None) -> np.ndarray:
@@ -254,6 +290,8 @@ def _wide_subpix(gray: np.ndarray, uv: np.ndarray, grid_shape: tuple, step: Opti
 
 
 def _min_step(grid: np.ndarray) -> float:
-    steps = np.concatenate([np.linalg.norm(np.diff(grid, axis=1), axis=2).ravel(),
-                            np.linalg.norm(np.diff(grid, axis=0), axis=2).ravel()])
-    return float(steps.min())
+    """The smallest distance between neighbouring corners of a (rows, cols, 2) grid."""
+    along_cols, along_rows = grid[:, 1:] - grid[:, :-1], grid[1:] - grid[:-1]
+    smallest_sq = min(np.einsum("ijk,ijk->ij", along_cols, along_cols).min(initial=np.inf),
+                      np.einsum("ijk,ijk->ij", along_rows, along_rows).min(initial=np.inf))
+    return float(np.sqrt(smallest_sq))

@@ -394,3 +394,19 @@ def test_layout_symmetries_skip_refits_without_changing_the_ids(name):
         a, b = fast.detect(image), slow.detect(image)
         assert a.accepted and b.accepted
         assert np.array_equal(a.point_id, b.point_id) and np.array_equal(a.uv, b.uv)
+
+
+def test_local_homography_residual_refuses_neighbours_that_are_not_points():
+    """The core's fit is given each point's neighbours as row indices: one outside the points is
+    refused with the reason, not read out of bounds."""
+    from rscalib import _core
+    from rscalib.errors import InputError
+
+    cols = CHECKERBOARD.grid_shape[1]
+    xy = CHECKERBOARD.points_m[[r * cols + c for r in range(3) for c in range(3)], :2]   # a 3x3 patch
+    nearest = np.array([[j for j in range(9) if j != i] for i in range(9)], dtype=np.int32)
+    uv = xy * 1000.0 + 50.0
+    assert np.nanmax(_core.local_homography_residual(xy, uv, nearest)) < 1e-9   # an exact homography
+    nearest[4, 3] = 9
+    with pytest.raises(InputError, match="nearest"):
+        _core.local_homography_residual(xy, uv, nearest)

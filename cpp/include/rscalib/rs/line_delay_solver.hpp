@@ -45,8 +45,9 @@ struct RsSolverOptions {
   int num_threads = 2;
   bool compute_covariance = true;
   // The Jacobian of the reprojection errors chained by hand through the basis weights
-  // (RsReprojectionAnalyticCost, docs/formulation.md §15); false: autodiff of the whole functor
-  // (RsReprojectionCost; the same numbers, slower; kept as the reference).
+  // (RsReprojectionAnalyticCost, docs/formulation.md §15; with refine_intrinsics
+  // AnalyticIntrinsicsTerm); false: autodiff of the whole functor (RsReprojectionCost,
+  // RsReprojectionIntrinsicsCost; the same numbers, slower; kept as the reference).
   bool analytic_jacobian = true;
   // sigma_d from the Schur complement of the normal equations (docs/formulation.md §15); false:
   // Ceres' covariance (sparse QR). The Schur path falls back to Ceres' when the trajectory block

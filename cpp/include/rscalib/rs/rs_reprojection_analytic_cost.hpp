@@ -13,6 +13,7 @@
 #include <ceres/sized_cost_function.h>
 
 #include "rscalib/rs/rs_projection.hpp"
+#include "rscalib/rs/rs_reprojection_intrinsics_cost.hpp"
 
 namespace rscalib::rs {
 
@@ -62,6 +63,40 @@ class RsReprojectionGroupCost : public ceres::CostFunction {
 
  private:
   std::vector<AnalyticReprojectionTerm> terms_;
+};
+
+// The residual of RsReprojectionIntrinsicsCost (the intrinsics theta as unknowns, the camera
+// check and --refine-intrinsics) with the same chaining: dr/dx and dr/dtheta by autodiff
+// (ceres::Jet<double, 6 + kIntrinsicsBlockSize>: 15 wide instead of the functor's 34), the
+// control points and d through the basis weights.
+//
+// Parameter blocks as RsReprojectionIntrinsicsCost: c0..c3 (6 each), line_delay (1),
+// intrinsics (kIntrinsicsBlockSize).
+struct AnalyticIntrinsicsTerm {
+  AnalyticIntrinsicsTerm(const spline::SpanPowerBasis& basis, const CameraModelOf& camera,
+                         double frame_time_minus_span_start_s, const double* uv_measured,
+                         const double* point_w, const Eigen::Matrix2d& sqrt_information);
+
+  // As ceres::CostFunction::Evaluate for the blocks c0..c3, d, theta.
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const;
+
+  spline::SpanPowerBasis basis;  // span_start 0
+  CameraModelOf camera;
+  double frame_offset_s;
+  WeightedMeasurement measurement;
+};
+
+// Several AnalyticIntrinsicsTerm of one span in one block of 2k rows (as RsReprojectionGroupCost;
+// one member per block under a robust loss).
+class RsReprojectionIntrinsicsGroupCost : public ceres::CostFunction {
+ public:
+  explicit RsReprojectionIntrinsicsGroupCost(std::vector<AnalyticIntrinsicsTerm> terms);
+
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override;
+
+ private:
+  std::vector<AnalyticIntrinsicsTerm> terms_;
 };
 
 }  // namespace rscalib::rs
