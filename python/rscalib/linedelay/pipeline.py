@@ -60,6 +60,9 @@ from .spline import (
 )
 
 PROBE_FIRST_DETECTED = 150   # detected frames the target-mismatch probe samples from
+# The probe of d that starts the self-check's halves (_probe_line_delay): the middle 2 s of a video of
+# at least 8 s, fixed knots every 2 frames; its d is used when inside (0, 1.5 x the nominal delay].
+PROBE_WINDOW_S, PROBE_MIN_VIDEO_S, PROBE_FRAMES_PER_SEGMENT, PROBE_MAX_NOMINAL = 2.0, 8.0, 2, 1.5
 # The camera check's solver steps from the solution (the first is damped): 3 gave the converged shift
 # to 0.2 % on the 60 s render with f off by 3 and 6 %, 2 to 4-26 % (docs/benchmarks.md, issue 31).
 CAMERA_CHECK_STEPS = 3
@@ -280,10 +283,11 @@ def _solve_with_self_check(observations: Observations, camera: CameraModel, opti
     if options.self_check and observations.num_frames >= 4 and _fits_in_memory(observations.num_observations):
         poses = per_frame_pnp(observations, camera)
     solved_halves = {}
+    line_delay0_s = _probe_line_delay(observations, camera, options, poses) if poses is not None else None
 
     def solve_half(half):
         shared = None if poses is None else poses.of_frames(observations.frame_times_s, half.frame_times_s)
-        solved = calibrate_line_delay(half, camera, options, frame_poses=shared)
+        solved = calibrate_line_delay(half, camera, options, frame_poses=shared, line_delay0_s=line_delay0_s)
         solved_halves[float(half.frame_times_s[0])] = solved
         return solved
 
@@ -319,6 +323,31 @@ def detect(video: PathLike, target: Union[Target, PathLike], camera: CameraModel
         raise InputError(f"the video is {detection.image_size[0]}x{detection.image_size[1]} but the camera file is "
                          f"{camera.width}x{camera.height}")
     return detection
+
+
+def _probe_line_delay(observations: Observations, camera: CameraModel, options: LineDelayOptions,
+                      poses) -> Optional[float]:
+    """The halves' start for d: one solve of the middle PROBE_WINDOW_S of the video on fixed knots (one
+    per PROBE_FRAMES_PER_SEGMENT frames), or None (the nominal start) when the video is short, the
+    knots are the user's, or the probe does not determine d inside (0, PROBE_MAX_NOMINAL x nominal].
+    From d's nominal start (the full frame interval) the halves' first round took 10 solver steps to
+    bring a hand-held video's d to half of it; from the probe's, 6 (docs/formulation.md §7)."""
+    times = observations.frame_times_s
+    if options.uniform_knots is not None or times[-1] - times[0] < PROBE_MIN_VIDEO_S:
+        return None
+    keep = np.abs(times - 0.5 * (times[0] + times[-1])) <= 0.5 * PROBE_WINDOW_S
+    part = observations.subset_frames(keep)
+    segments = max(1, part.num_frames // PROBE_FRAMES_PER_SEGMENT)
+    probe_options = replace(options, uniform_knots=segments, max_rounds=1, self_check=False, refine_intrinsics=False)
+    try:
+        probe = calibrate_line_delay(part, camera, probe_options,
+                                     frame_poses=poses.of_frames(times, part.frame_times_s))
+    except InputError:
+        return None
+    nominal_s = 1.0 / (frame_rate_hz(part) * probe.rows)
+    if probe.determined and 0.0 < probe.line_delay_s <= PROBE_MAX_NOMINAL * nominal_s:
+        return float(probe.line_delay_s)
+    return None
 
 
 def _start_from_halves(halves: list, options: LineDelayOptions) -> dict:

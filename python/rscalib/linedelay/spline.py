@@ -52,6 +52,10 @@ _FINAL_FUNCTION_TOLERANCE = 1e-9
 # A round that splits at most this fraction of the segments is followed by the final (tight) round:
 # after such a round (~7 % split on hand-held videos) the next splits at most a few per mille.
 _FINAL_AFTER_SPLITS = 0.1
+# The fraction of well-modelled segments over the split threshold by chance (the normal tail beyond
+# SPLIT_MARGIN_SIGMAS: 2.3 %). After the first round, a round that splits no more than that ends the
+# adaptation: a further round would chase noise (docs/formulation.md §7).
+CHANCE_SPLIT_FRACTION = 0.5 * math.erfc(SPLIT_MARGIN_SIGMAS / math.sqrt(2.0))
 
 
 @dataclass
@@ -330,8 +334,10 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
     summary = None
     # Rounds are solved loosely, except the final one: tight, then sigma_d alone. A round is final when
     # the round before split few segments (those rarely split again; if the final round still splits
-    # some, another round follows). Otherwise a polish on the final knots ends the solve.
-    final = False
+    # more than chance would, another round follows), and the first round is final when it starts from
+    # knots already adapted (the whole video from its halves). Otherwise a polish on the final knots
+    # ends the solve.
+    final = start_trajectory is not None and adaptive_knots and not num_segments
     for round_index in range(max(1, max_rounds)):
         last_chance = round_index == max_rounds - 1
         # a final round usually ends the adaptation: sigma_d comes with it (wasted if it splits again)
@@ -353,6 +359,10 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
         new_knots, at_cap = _split_segments(trajectory, segment_cost, summary.segment_count,
                                             min_segment_s, SPLIT_MARGIN_SIGMAS,
                                             structure.correlation) if adaptive_knots else ([], 0)
+        # splits no more than chance would make on a well-modelled trajectory end the adaptation (not in
+        # the first round from PnP, whose knots are too few on purpose)
+        if (round_index > 0 or final) and len(new_knots) <= CHANCE_SPLIT_FRACTION * trajectory.num_segments:
+            new_knots = []
         if per_frame and not (final and not new_knots):  # the next solve weighs the errors by it
             obs_sigma = new_sigma
             use_sigma(obs_sigma)
