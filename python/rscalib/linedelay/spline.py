@@ -334,10 +334,13 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
     summary = None
     # Rounds are solved loosely, except the final one: tight, then sigma_d alone. A round is final when
     # the round before split few segments (those rarely split again; if the final round still splits
-    # more than chance would, another round follows), and the first round is final when it starts from
-    # knots already adapted (the whole video from its halves). Otherwise a polish on the final knots
-    # ends the solve.
-    final = start_trajectory is not None and adaptive_knots and not num_segments
+    # more than chance would, another round follows). Otherwise a polish on the final knots ends the
+    # solve. The first round is never final: its residuals give the noise model's fixed-pattern part,
+    # which weighs the errors of the rounds after it (and of sigma_d).
+    final = False
+    # knots adapted already (the whole video from its halves): chance-level splits end the adaptation
+    # from the first round on
+    adapted_start = start_trajectory is not None and adaptive_knots and not num_segments
     for round_index in range(max(1, max_rounds)):
         last_chance = round_index == max_rounds - 1
         # a final round usually ends the adaptation: sigma_d comes with it (wasted if it splits again)
@@ -361,7 +364,7 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
                                             structure.correlation) if adaptive_knots else ([], 0)
         # splits no more than chance would make on a well-modelled trajectory end the adaptation (not in
         # the first round from PnP, whose knots are too few on purpose)
-        if (round_index > 0 or final) and len(new_knots) <= CHANCE_SPLIT_FRACTION * trajectory.num_segments:
+        if (round_index > 0 or adapted_start) and len(new_knots) <= CHANCE_SPLIT_FRACTION * trajectory.num_segments:
             new_knots = []
         if per_frame and not (final and not new_knots):  # the next solve weighs the errors by it
             obs_sigma = new_sigma
