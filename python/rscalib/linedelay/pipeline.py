@@ -287,7 +287,8 @@ def _solve_with_self_check(observations: Observations, camera: CameraModel, opti
 
     def solve_half(half):
         shared = None if poses is None else poses.of_frames(observations.frame_times_s, half.frame_times_s)
-        solved = calibrate_line_delay(half, camera, options, frame_poses=shared, line_delay0_s=line_delay0_s)
+        solved = calibrate_line_delay(half, camera, options, frame_poses=shared, line_delay0_s=line_delay0_s,
+                                      solver_threads=1)
         solved_halves[float(half.frame_times_s[0])] = solved
         return solved
 
@@ -352,8 +353,8 @@ def _probe_line_delay(observations: Observations, camera: CameraModel, options: 
 
 def _start_from_halves(halves: list, options: LineDelayOptions) -> dict:
     """calibrate_line_delay's start for the whole video from its two solved halves: their joined
-    trajectory and the inverse-variance mean of their d; {} (the PnP start) without both halves or
-    with fixed knots."""
+    trajectory, the inverse-variance mean of their d and the mean of their noise models' fixed-pattern
+    parts; {} (the PnP start) without both halves or with fixed knots."""
     if len(halves) != 2 or options.uniform_knots is not None:
         return {}
     weights = [1.0 / h.line_delay_std_s ** 2 if h.determined and 0 < h.line_delay_std_s < math.inf else 0.0
@@ -361,7 +362,11 @@ def _start_from_halves(halves: list, options: LineDelayOptions) -> dict:
     if not sum(weights) > 0:
         return {}
     d = sum(w * h.line_delay_s for w, h in zip(weights, halves)) / sum(weights)
-    return {"start_trajectory": joined_trajectory([h.trajectory for h in halves]), "line_delay0_s": d}
+    start = {"start_trajectory": joined_trajectory([h.trajectory for h in halves]), "line_delay0_s": d}
+    fixed = [h.noise.get("fixed_pattern_px") for h in halves]
+    if all(f is not None and math.isfinite(f) for f in fixed):
+        start["start_fixed_pattern_px"] = float(np.mean(fixed))
+    return start
 
 
 def _fits_in_memory(num_observations: int) -> bool:

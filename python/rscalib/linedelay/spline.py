@@ -14,6 +14,7 @@ from typing import Callable, Optional, Union
 
 import numpy as np
 
+from .. import checks
 from .._core import BSpline, CameraModel, RsSolverOptions, fit_bspline, solve_line_delay, unwrap_rotation_vectors
 from ..errors import InputError
 from ..observations import Observations
@@ -56,6 +57,9 @@ _FINAL_AFTER_SPLITS = 0.1
 # SPLIT_MARGIN_SIGMAS: 2.3 %). After the first round, a round that splits no more than that ends the
 # adaptation: a further round would chase noise (docs/formulation.md §7).
 CHANCE_SPLIT_FRACTION = 0.5 * math.erfc(SPLIT_MARGIN_SIGMAS / math.sqrt(2.0))
+# The whole video's first round, weighted by its halves' fixed-pattern noise, is final when the weights
+# its own residuals give differ from those by at most this fraction (else they are used for a polish).
+START_WEIGHTS_TOLERANCE = 0.05
 
 
 @dataclass
@@ -137,7 +141,8 @@ def _finite_or_none(x: float) -> Optional[float]:
 
 
 def _solver_options(pixel_sigma: float, *, estimate_line_delay: bool, standardise_errors: bool,
-                    use_motion_prior: bool, robust_loss: str, compute_covariance: bool) -> RsSolverOptions:
+                    use_motion_prior: bool, robust_loss: str, compute_covariance: bool,
+                    threads: int = SOLVER_THREADS) -> RsSolverOptions:
     options = RsSolverOptions()
     options.pixel_sigma = float(pixel_sigma)
     options.estimate_line_delay = estimate_line_delay
@@ -145,7 +150,7 @@ def _solver_options(pixel_sigma: float, *, estimate_line_delay: bool, standardis
     options.use_motion_prior = use_motion_prior
     options.motion_prior_q = np.asarray(DEFAULT_MOTION_PRIOR_Q, dtype=np.float64)
     options.robust_loss = robust_loss
-    options.num_threads = SOLVER_THREADS
+    options.num_threads = int(threads)
     options.compute_covariance = compute_covariance
     return options
 
@@ -228,7 +233,9 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel,
                          line_delay0_s: Optional[float] = None,
                          frame_poses: Optional[FramePoses] = None,
                          start_trajectory: Optional[BSpline] = None,
-                         progress: Optional[Callable[[RoundRecord], None]] = None) -> LineDelayResult:
+                         progress: Optional[Callable[[RoundRecord], None]] = None,
+                         solver_threads: Optional[int] = None,
+                         start_fixed_pattern_px: Optional[float] = None) -> LineDelayResult:
     """Estimate the line delay d (s/row) and the continuous-time trajectory (Oth et al. 2013 §3-4):
     the solve alone, on detections already made. The job with its self-check, verdict and files is
     :func:`rscalib.calibrate_video`, which calls this.
@@ -247,9 +254,16 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel,
     knots inside this data's time span are the first round's, and the adaptation goes on from there
     (docs/formulation.md §9).
     progress: called after each round.
+    start_fixed_pattern_px: with start_trajectory, the noise model's fixed-pattern part (§8) found where
+    it was solved (the halves' mean): the errors are weighted by it from the first round, which is then
+    the final one (tight, with sigma_d) and ends the adaptation unless it splits more than chance would.
+    solver_threads: the solver's threads (default SOLVER_THREADS, the machine's 2 cores; the self-check's
+    halves, solved side by side, take 1 each: the same numbers, less contention).
     """
+    threads = SOLVER_THREADS if solver_threads is None else checks.whole(solver_threads, "solver_threads", 1, 64)
     return _run(observations, camera, options or LineDelayOptions(), estimate=True, line_delay_s=line_delay0_s,
-                frame_poses=frame_poses, start_trajectory=start_trajectory, progress=progress)
+                frame_poses=frame_poses, start_trajectory=start_trajectory, progress=progress, threads=threads,
+                start_fixed_pattern_px=start_fixed_pattern_px)
 
 
 def localize(observations: Observations, camera: CameraModel, line_delay_s: float,
@@ -268,7 +282,7 @@ def localize(observations: Observations, camera: CameraModel, line_delay_s: floa
 
 
 def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_poses=None, start_trajectory=None,
-         progress=None) -> LineDelayResult:
+         progress=None, threads=SOLVER_THREADS, start_fixed_pattern_px=None) -> LineDelayResult:
     rows, pixel_sigma, robust_loss, max_rounds = options.rows, options.pixel_sigma_px, options.robust_loss, \
         options.max_rounds
     check_rows_read(rows, observations.image_size[1])
@@ -307,7 +321,8 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
         trajectory = initial_trajectory(used, used_poses, d, segments, t_begin, t_end)
 
     solver = _solver_options(sigma, estimate_line_delay=estimate, standardise_errors=standardise_errors,
-                             use_motion_prior=use_motion_prior, robust_loss=robust_loss, compute_covariance=False)
+                             use_motion_prior=use_motion_prior, robust_loss=robust_loss, compute_covariance=False,
+                             threads=threads)
     # The noise model (docs/formulation.md §8): white noise per frame from the grid, plus what the
     # residuals show after each round (a fixed pattern per corner, frame-to-frame correlation).
     per_frame = sigma_source == "grid third differences"
@@ -335,12 +350,16 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
     # Rounds are solved loosely, except the final one: tight, then sigma_d alone. A round is final when
     # the round before split few segments (those rarely split again; if the final round still splits
     # more than chance would, another round follows). Otherwise a polish on the final knots ends the
-    # solve. The first round is never final: its residuals give the noise model's fixed-pattern part,
-    # which weighs the errors of the rounds after it (and of sigma_d).
-    final = False
-    # knots adapted already (the whole video from its halves): chance-level splits end the adaptation
-    # from the first round on
+    # solve. The first round is final only from knots already adapted and errors already weighted by the
+    # noise model's fixed-pattern part (the whole video from its halves): otherwise its residuals give
+    # that part, which weighs the errors of the rounds after it (and of sigma_d).
+    # knots adapted already: chance-level splits end the adaptation from the first round on
     adapted_start = start_trajectory is not None and adaptive_knots and not num_segments
+    final = False
+    if adapted_start and per_frame and start_fixed_pattern_px is not None and np.isfinite(start_fixed_pattern_px):
+        obs_sigma = np.sqrt(white ** 2 + float(start_fixed_pattern_px) ** 2)
+        use_sigma(obs_sigma)
+        final = True
     for round_index in range(max(1, max_rounds)):
         last_chance = round_index == max_rounds - 1
         # a final round usually ends the adaptation: sigma_d comes with it (wasted if it splits again)
@@ -366,6 +385,9 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
         # the first round from PnP, whose knots are too few on purpose)
         if (round_index > 0 or adapted_start) and len(new_knots) <= CHANCE_SPLIT_FRACTION * trajectory.num_segments:
             new_knots = []
+        if round_index == 0 and final and per_frame and \
+                np.max(np.abs(new_sigma / obs_sigma - 1.0)) > START_WEIGHTS_TOLERANCE:
+            final = False   # the start's weights (the halves' fixed pattern) are not this video's: re-weigh, polish
         if per_frame and not (final and not new_knots):  # the next solve weighs the errors by it
             obs_sigma = new_sigma
             use_sigma(obs_sigma)
