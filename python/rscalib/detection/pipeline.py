@@ -15,7 +15,7 @@ import time
 from collections import deque
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import Iterator, Optional, Sequence, Union
+from typing import Callable, Iterator, Optional, Sequence, Union
 
 import cv2
 import numpy as np
@@ -34,7 +34,8 @@ from .tracking import RunDetector, detect_run, run_length
 
 
 def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, Path],
-                 options: Optional[DetectOptions] = None, *, progress: ProgressArg = True) -> DetectionResult:
+                 options: Optional[DetectOptions] = None, *, progress: ProgressArg = True,
+                 alongside: Optional[Callable[[], None]] = None) -> DetectionResult:
     """Detect `target` in every frame of a video, an image folder (file-name order, optional
     timestamps.txt) or a list of image files.
 
@@ -49,8 +50,12 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
     whatever the number of workers. Workers are spawned (not forked), so a calling script needs
     the usual `if __name__ == "__main__":` guard.
     options.cache: reuse / store the result under options.cache_dir (default_cache_dir()), keyed by
-    the hash of the source's bytes, the target definition, the detector's settings and DETECTOR_VERSION."""
+    the hash of the source's bytes, the target definition, the detector's settings and DETECTOR_VERSION.
+    alongside: called once in this process before the first frame is detected, while the workers start
+    (their start-up, ~0.3 s of imports each, runs on the other cores meanwhile); an exception it raises
+    stops the workers and is raised here (e.g. the line-delay job's check of the target file)."""
     checks.source(source, "source")
+    checks.optional_callable(alongside, "alongside")
     checks.instance(target, "target", (str, os.PathLike, Target), "a target file or an rscalib.Target")
     options = DetectOptions() if options is None else options
     checks.instance(options, "options", (DetectOptions,), "an rscalib.DetectOptions or None")
@@ -69,10 +74,12 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
         cache_file = cache_file / f"{key}.npz"
         cached = load_cache(cache_file, target, cache_problems)
         if cached is not None:
+            if alongside is not None:
+                alongside()
             cached.detect_time_s = time.perf_counter() - started
             return cached
     try:
-        result = _detect_frames(frames, target, options, workers, progress)
+        result = _detect_frames(frames, target, options, workers, progress, alongside)
     except BrokenProcessPool:
         # e.g. a worker killed for memory, or a __main__ that spawn cannot re-import
         result = _detect_frames(open_source(source), target, options, 1, progress)
@@ -275,8 +282,12 @@ def _start_pool(workers: int, target: Target, options: DetectOptions):
                                initializer=_worker_init, initargs=(target, options, os.getpid()))
 
 
+def _worker_ready() -> None:
+    """A task that only makes the pool start a worker process."""
+
+
 def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, workers: Optional[int],
-                   progress: bool) -> DetectionResult:
+                   progress: bool, alongside: Optional[Callable[[], None]] = None) -> DetectionResult:
     estimate = frames.frame_count_estimate
     if workers is None:
         # starting a worker costs ~0.5 s, a frame 5-60 ms: short inputs are faster in-process
@@ -296,6 +307,12 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
     cv_threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
+        if alongside is not None:
+            if pool is not None:  # the pool starts a process per task while none is idle
+                with _sigint_blocked():
+                    for _ in range(workers):
+                        pool.submit(_worker_ready)
+            alongside()
         with Progress(progress, estimate, f"detecting {target.target_type}") as bar:
             collected = _detect_segments(frames, plan, pool, run_frames, workers, bar) if plan else None
             if collected is None:

@@ -313,9 +313,11 @@ def detect(video: PathLike, target: Union[Target, PathLike], camera: CameraModel
     options = options or LineDelayOptions()
     if not isinstance(target, Target):
         target = load_target(target)
-    early = check_target_early(video, target)
-    detection = detect_video(video, target, options.detection, progress=progress)
-    if not early:
+    # the early check of the target file runs while the detection workers start
+    early = []
+    detection = detect_video(video, target, options.detection, progress=progress,
+                             alongside=lambda: early.append(check_target_early(video, target)))
+    if not (early and early[0]):
         check_target_matches(video, target, detection)
     if detection.observations.num_observations == 0:
         raise InputError(f"the target was not detected in any of the {detection.frames_total} frames "

@@ -306,6 +306,31 @@ def test_video(tmp_path_factory):
     return write_test_video(tmp_path_factory.mktemp("video") / "board.avi")
 
 
+def test_alongside_runs_once_while_the_workers_start_and_its_error_stops_the_detection(test_video, tmp_path):
+    """`alongside` (the line-delay job's early check of the target file) runs once, in this process,
+    before any frame is detected, with workers, in one process and on a cached result; an exception
+    it raises stops the detection: nothing is returned or cached."""
+    path, kinds = test_video
+    cache = tmp_path / "cache"
+    for options in (DetectOptions(workers=2, cache_dir=cache), DetectOptions(workers=1, cache=False),
+                    DetectOptions(workers=2, cache_dir=cache)):   # the last: from the cache
+        calls: list = []
+        result = detect_video(path, CHECKERBOARD, options, progress=False, alongside=lambda calls=calls: calls.append(1))
+        assert calls == [1] and result.frames_detected == kinds.count("board")
+    assert result.from_cache
+
+    class Stop(Exception):
+        pass
+
+    def stop():
+        raise Stop("the target file does not match")
+
+    other = tmp_path / "other_cache"
+    with pytest.raises(Stop):
+        detect_video(path, CHECKERBOARD, DetectOptions(workers=2, cache_dir=other), progress=False, alongside=stop)
+    assert not list(other.glob("*.npz"))
+
+
 def test_detect_video_counts_and_caches(test_video, tmp_path, capsys):
     path, kinds = test_video
     cache = tmp_path / "cache"
