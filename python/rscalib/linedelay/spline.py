@@ -57,6 +57,9 @@ _FINAL_AFTER_SPLITS = 0.1
 # SPLIT_MARGIN_SIGMAS: 2.3 %). After the first round, a round that splits no more than that ends the
 # adaptation: a further round would chase noise (docs/formulation.md §7).
 CHANCE_SPLIT_FRACTION = 0.5 * math.erfc(SPLIT_MARGIN_SIGMAS / math.sqrt(2.0))
+# ... on a trajectory that fits as a whole (J/2N at most this): where the errors are larger than the
+# noise model says, the few segments over the threshold are misfit, not chance (15 fps shake videos).
+CHANCE_STOP_MAX_COST = 1.1
 # The whole video's first round, weighted by its halves' fixed-pattern noise, is final when the weights
 # its own residuals give differ from those by at most this fraction (else they are used for a polish).
 START_WEIGHTS_TOLERANCE = 0.05
@@ -383,7 +386,8 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
                                             structure.correlation) if adaptive_knots else ([], 0)
         # splits no more than chance would make on a well-modelled trajectory end the adaptation (not in
         # the first round from PnP, whose knots are too few on purpose)
-        if (round_index > 0 or adapted_start) and len(new_knots) <= CHANCE_SPLIT_FRACTION * trajectory.num_segments:
+        if (round_index > 0 or adapted_start) and cost <= CHANCE_STOP_MAX_COST and \
+                len(new_knots) <= CHANCE_SPLIT_FRACTION * trajectory.num_segments:
             new_knots = []
         if round_index == 0 and final and per_frame and \
                 np.max(np.abs(new_sigma / obs_sigma - 1.0)) > START_WEIGHTS_TOLERANCE:
