@@ -154,8 +154,11 @@ def write_corners_vnl(path, frame_names: list, frame_index: np.ndarray, point_id
         table = np.full((width * height, 2), np.nan)
         table[point_id[mine]] = uv[mine]
         safe = re.sub(r"\s", "_", str(name))
-        # Python floats format several times faster than NumPy scalars (u != u: NaN, not detected)
-        rows.extend(f"{safe} - - -" if u != u else f"{safe} {u:.6f} {v:.6f} 0" for u, v in table.tolist())
+        if np.isfinite(table).all():   # a whole grid (tracked frames): one format call for the frame
+            line = safe.replace("%", "%%") + " %.6f %.6f 0"
+            rows.append("\n".join([line] * len(table)) % tuple(table.ravel().tolist()))
+        else:  # Python floats format several times faster than NumPy scalars (u != u: NaN, not detected)
+            rows.extend(f"{safe} - - -" if u != u else f"{safe} {u:.6f} {v:.6f} 0" for u, v in table.tolist())
         frames += 1
     Path(path).write_text("\n".join(rows) + "\n")
     return frames
