@@ -259,7 +259,8 @@ def calibrate_line_delay(observations: Observations, camera: CameraModel,
     progress: called after each round.
     start_fixed_pattern_px: with start_trajectory, the noise model's fixed-pattern part (§8) found where
     it was solved (the halves' mean): the errors are weighted by it from the first round, which is then
-    the final one (tight, with sigma_d) and ends the adaptation unless it splits more than chance would.
+    the final one (tight, with sigma_d) when its own residuals give weights within START_WEIGHTS_TOLERANCE
+    of those, and ends the adaptation unless it splits more than chance would.
     solver_threads: the solver's threads (default SOLVER_THREADS, the machine's 2 cores; the self-check's
     halves, solved side by side, take 1 each: the same numbers, less contention).
     """
