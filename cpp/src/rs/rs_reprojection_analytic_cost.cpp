@@ -1,6 +1,7 @@
 #include "rscalib/rs/rs_reprojection_analytic_cost.hpp"
 
 #include <utility>
+#include <vector>
 
 #include <ceres/jet.h>
 
@@ -19,6 +20,43 @@ bool ResidualOfState(const SpanCamera& cam, const WeightedMeasurement& measureme
   T uv[2];
   if (!cam.Project(point_c, uv)) return false;
   measurement.Residual(uv, residual);
+  return true;
+}
+
+// The chain of docs/formulation.md §15 into the Jacobians of blocks c0..c3 and d (each may be
+// null): dr/dc_j = w_j(u) G, dr/dd = G x'(u) v, with G = dr/dx.
+void ChainStateJacobian(const Eigen::Matrix<double, 2, kStateDim>& dr_dstate,
+                        const double (&weights)[3][4], double const* const* parameters, double v,
+                        double** jacobians) {
+  for (int j = 0; j < 4; ++j) {
+    if (!jacobians[j]) continue;
+    Eigen::Map<Eigen::Matrix<double, 2, kStateDim, Eigen::RowMajor>> jacobian(jacobians[j]);
+    jacobian = weights[0][j] * dr_dstate;
+  }
+  if (jacobians[4]) {
+    double state_rate[kStateDim];  // dx/du
+    spline::CombineControlPoints(weights[1], parameters, kStateDim, state_rate);
+    const Eigen::Vector2d dr_dd =
+        dr_dstate * (v * Eigen::Map<const Eigen::Matrix<double, kStateDim, 1>>(state_rate));
+    jacobians[4][0] = dr_dd[0];
+    jacobians[4][1] = dr_dd[1];
+  }
+}
+
+// A group's members evaluated in turn: member m's residuals at row 2m, its row-major Jacobian rows
+// at row 2m of each (2k x block size) block Jacobian.
+template <typename Term, size_t kBlocks>
+bool EvaluateMembers(const std::vector<Term>& terms, const int (&block_sizes)[kBlocks],
+                     double const* const* parameters, double* residuals, double** jacobians) {
+  double* member_jacobians[kBlocks];
+  for (size_t m = 0; m < terms.size(); ++m) {
+    if (jacobians) {
+      for (size_t b = 0; b < kBlocks; ++b)
+        member_jacobians[b] = jacobians[b] ? jacobians[b] + 2 * m * block_sizes[b] : nullptr;
+    }
+    if (!terms[m].Evaluate(parameters, residuals + 2 * m, jacobians ? member_jacobians : nullptr))
+      return false;
+  }
   return true;
 }
 
@@ -58,19 +96,7 @@ bool AnalyticReprojectionTerm::Evaluate(double const* const* parameters, double*
       (Eigen::Matrix<double, 2, kStateDim>() << residual_jet[0].v.transpose(),
        residual_jet[1].v.transpose())
           .finished();
-  for (int j = 0; j < 4; ++j) {
-    if (!jacobians[j]) continue;
-    Eigen::Map<Eigen::Matrix<double, 2, kStateDim, Eigen::RowMajor>> jacobian(jacobians[j]);
-    jacobian = weights[0][j] * dr_dstate;
-  }
-  if (jacobians[4]) {
-    double state_rate[kStateDim];  // dx/du
-    spline::CombineControlPoints(weights[1], parameters, kStateDim, state_rate);
-    const Eigen::Vector2d dr_dd =
-        dr_dstate * (v * Eigen::Map<const Eigen::Matrix<double, kStateDim, 1>>(state_rate));
-    jacobians[4][0] = dr_dd[0];
-    jacobians[4][1] = dr_dd[1];
-  }
+  ChainStateJacobian(dr_dstate, weights, parameters, v, jacobians);
   return true;
 }
 
@@ -82,18 +108,8 @@ RsReprojectionGroupCost::RsReprojectionGroupCost(std::vector<AnalyticReprojectio
 
 bool RsReprojectionGroupCost::Evaluate(double const* const* parameters, double* residuals,
                                        double** jacobians) const {
-  // Row-major (2k x size) Jacobians: member m's 2 rows are the 2 x size block at row 2m.
   constexpr int kBlockSizes[5] = {6, 6, 6, 6, 1};
-  double* member_jacobians[5];
-  for (size_t m = 0; m < terms_.size(); ++m) {
-    if (jacobians) {
-      for (int b = 0; b < 5; ++b)
-        member_jacobians[b] = jacobians[b] ? jacobians[b] + 2 * m * kBlockSizes[b] : nullptr;
-    }
-    if (!terms_[m].Evaluate(parameters, residuals + 2 * m, jacobians ? member_jacobians : nullptr))
-      return false;
-  }
-  return true;
+  return EvaluateMembers(terms_, kBlockSizes, parameters, residuals, jacobians);
 }
 
 AnalyticIntrinsicsTerm::AnalyticIntrinsicsTerm(const spline::SpanPowerBasis& basis_in,
@@ -138,19 +154,7 @@ bool AnalyticIntrinsicsTerm::Evaluate(double const* const* parameters, double* r
   residuals[1] = residual_jet[1].a;
   Eigen::Matrix<double, 2, kStateDim> dr_dstate;
   for (int r = 0; r < 2; ++r) dr_dstate.row(r) = residual_jet[r].v.head<kStateDim>().transpose();
-  for (int j = 0; j < 4; ++j) {
-    if (!jacobians[j]) continue;
-    Eigen::Map<Eigen::Matrix<double, 2, kStateDim, Eigen::RowMajor>> jacobian(jacobians[j]);
-    jacobian = weights[0][j] * dr_dstate;
-  }
-  if (jacobians[4]) {
-    double state_rate[kStateDim];  // dx/du
-    spline::CombineControlPoints(weights[1], parameters, kStateDim, state_rate);
-    const Eigen::Vector2d dr_dd =
-        dr_dstate * (v * Eigen::Map<const Eigen::Matrix<double, kStateDim, 1>>(state_rate));
-    jacobians[4][0] = dr_dd[0];
-    jacobians[4][1] = dr_dd[1];
-  }
+  ChainStateJacobian(dr_dstate, weights, parameters, v, jacobians);
   if (jacobians[5]) {
     Eigen::Map<Eigen::Matrix<double, 2, kIntrinsicsBlockSize, Eigen::RowMajor>> dr_dtheta(
         jacobians[5]);
@@ -170,16 +174,7 @@ RsReprojectionIntrinsicsGroupCost::RsReprojectionIntrinsicsGroupCost(
 bool RsReprojectionIntrinsicsGroupCost::Evaluate(double const* const* parameters, double* residuals,
                                                  double** jacobians) const {
   constexpr int kBlockSizes[6] = {6, 6, 6, 6, 1, kIntrinsicsBlockSize};
-  double* member_jacobians[6];
-  for (size_t m = 0; m < terms_.size(); ++m) {
-    if (jacobians) {
-      for (int b = 0; b < 6; ++b)
-        member_jacobians[b] = jacobians[b] ? jacobians[b] + 2 * m * kBlockSizes[b] : nullptr;
-    }
-    if (!terms_[m].Evaluate(parameters, residuals + 2 * m, jacobians ? member_jacobians : nullptr))
-      return false;
-  }
-  return true;
+  return EvaluateMembers(terms_, kBlockSizes, parameters, residuals, jacobians);
 }
 
 }  // namespace rscalib::rs
