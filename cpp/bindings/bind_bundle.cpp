@@ -111,6 +111,11 @@ void BindBundle(py::module_& m) {
                      "depth (<= 0: no bound)")
       .def_readwrite("beyond_infinity_limit", &BundleOptions::beyond_infinity_limit,
                      "rho >= -beyond_infinity_limit x the median start rho (< 0: no bound)")
+      .def_readwrite("free_points_first", &BundleOptions::free_points_first,
+                     "solve with the points free first; points ending outside the bounds are "
+                     "dropped while few, else solved again with Ceres' bounds")
+      .def_readwrite("max_out_of_range_share", &BundleOptions::max_out_of_range_share,
+                     "the share of the points a free solve may drop for leaving the bounds")
       .def_readwrite("scale_keyframe", &BundleOptions::scale_keyframe,
                      "the keyframe whose distance from the first is held; -1: the farthest")
       .def_readwrite("prior_pixel_sigma_px", &BundleOptions::prior_pixel_sigma_px,
@@ -136,6 +141,10 @@ void BindBundle(py::module_& m) {
       .def_readonly("points_beyond_infinity", &BundleResult::points_beyond_infinity)
       .def_readonly("points_at_bounds", &BundleResult::points_at_bounds,
                     "points whose rho ended at a bound (near_limit, beyond_infinity_limit)")
+      .def_readonly("points_out_of_range", &BundleResult::points_out_of_range,
+                    "points dropped for ending outside the bounds in the free solve")
+      .def_readonly("solved_with_bounds", &BundleResult::solved_with_bounds,
+                    "Ceres' bounds gave the result (too many points left the range)")
       .def_readonly("termination", &BundleResult::termination)
       .def_readonly("converged", &BundleResult::converged)
       .def_readonly("iterations", &BundleResult::iterations)

@@ -970,6 +970,14 @@ class BundleOptions:
     def beyond_infinity_limit(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
+    def free_points_first(self) -> bool:
+        """
+        solve with the points free first; points ending outside the bounds are dropped while few, else solved again with Ceres' bounds
+        """
+    @free_points_first.setter
+    def free_points_first(self, arg0: bool) -> None:
+        ...
+    @property
     def function_tolerance(self) -> float:
         ...
     @function_tolerance.setter
@@ -994,6 +1002,14 @@ class BundleOptions:
         ...
     @max_iterations.setter
     def max_iterations(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def max_out_of_range_share(self) -> float:
+        """
+        the share of the points a free solve may drop for leaving the bounds
+        """
+    @max_out_of_range_share.setter
+    def max_out_of_range_share(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def near_limit(self) -> float:
@@ -1128,6 +1144,11 @@ class BundleResult:
     def points_beyond_infinity(self) -> int:
         ...
     @property
+    def points_out_of_range(self) -> int:
+        """
+        points dropped for ending outside the bounds in the free solve
+        """
+    @property
     def remaining_step(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
         ...
     @property
@@ -1147,6 +1168,11 @@ class BundleResult:
     @property
     def solve_time_s(self) -> float:
         ...
+    @property
+    def solved_with_bounds(self) -> bool:
+        """
+        Ceres' bounds gave the result (too many points left the range)
+        """
     @property
     def step_sigma(self) -> float:
         ...

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <iostream>
 #include <limits>
 #include <memory>
@@ -25,6 +26,8 @@ namespace rscalib::bundle {
 namespace {
 
 constexpr double kMaxJacobianEntries = 2 * (kMaxGlobals + 6 + 6 + 3);
+// Rounds of the free solve, each dropping the points that left their range, before a bounded solve.
+constexpr int kMaxDropRounds = 3;
 
 std::string Index(const char* what, Eigen::Index i) {
   return std::string(what) + "[" + std::to_string(i) + "]";
@@ -65,6 +68,8 @@ void CheckOptions(const BundleOptions& options) {
         solver + "'");
   if (!std::isfinite(options.near_limit) || !std::isfinite(options.beyond_infinity_limit))
     throw InputError("bundle adjustment: near_limit and beyond_infinity_limit must be finite");
+  if (!(options.max_out_of_range_share >= 0.0 && options.max_out_of_range_share <= 1.0))
+    throw InputError("bundle adjustment: max_out_of_range_share must be in [0, 1]");
   if (!(options.prior_pixel_sigma_px > 0.0) || !std::isfinite(options.prior_pixel_sigma_px))
     throw InputError("bundle adjustment: prior_pixel_sigma_px must be positive and finite");
 }
@@ -301,50 +306,17 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
   result.scale_keyframe = scale_keyframe;
 
   // The problem. Costs, the loss and the manifolds stay ours.
-  ceres::Problem::Options problem_options;
-  problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-  problem_options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-  ceres::Problem problem(problem_options);
   const std::unique_ptr<ceres::LossFunction> loss =
       MakeLoss(options.robust_loss, options.robust_loss_scale_px);
   PoseManifold pose_manifold;
   BaselineManifold baseline_manifold(new BaselineManifoldFunctor(first_centre));
   std::unique_ptr<ceres::Manifold> intrinsics_manifold;
-  auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
-
-  problem.AddParameterBlock(intrinsics.data(), n_cam);
-  ordering->AddElementToGroup(intrinsics.data(), 1);
-  if (n_free_cam == 0) {
-    problem.SetParameterBlockConstant(intrinsics.data());
-  } else if (n_free_cam < n_cam) {
+  if (n_free_cam > 0 && n_free_cam < n_cam) {
     std::vector<int> held;
     for (int i = 0; i < n_cam; ++i)
       if (!free_param[i]) held.push_back(i);
     intrinsics_manifold = std::make_unique<ceres::SubsetManifold>(n_cam, held);
-    problem.SetManifold(intrinsics.data(), intrinsics_manifold.get());
   }
-  problem.AddParameterBlock(&line_delay_us, 1);
-  ordering->AddElementToGroup(&line_delay_us, 1);
-  if (!estimate_delay) problem.SetParameterBlockConstant(&line_delay_us);
-  for (int k = 0; k < num_keyframes; ++k) {
-    if (!involved[k] && k != 0) continue;
-    problem.AddParameterBlock(poses.row(k).data(), 6);
-    ordering->AddElementToGroup(poses.row(k).data(), 1);
-    if (k == 0) problem.SetParameterBlockConstant(poses.row(k).data());
-    else if (k == scale_keyframe) problem.SetManifold(poses.row(k).data(), &baseline_manifold);
-    else problem.SetManifold(poses.row(k).data(), &pose_manifold);
-  }
-  for (int j = 0; j < num_points; ++j) {
-    if (!point_used[j]) continue;
-    double* point = points.row(j).data();
-    problem.AddParameterBlock(point, 3);
-    ordering->AddElementToGroup(point, 0);
-    if (std::isfinite(rho_low)) problem.SetParameterLowerBound(point, 2, rho_low);
-    if (std::isfinite(rho_high)) problem.SetParameterUpperBound(point, 2, rho_high);
-  }
-  for (int i = 0; i < n; ++i)
-    if (result.used[i]) problem.AddResidualBlock(costs[i].get(), loss.get(), blocks[i].blocks);
   std::unique_ptr<ceres::CostFunction> prior_cost;
   double prior_weight = 0.0;  // d r / d d of the prior (px per µs/row)
   if (data.line_delay.mode == LineDelayMode::kPrior) {
@@ -352,43 +324,314 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
     prior_cost.reset(LineDelayPriorCost::Create(data.line_delay.prior_mean_s / kMicroseconds,
                                                 data.line_delay.prior_sigma_s / kMicroseconds,
                                                 options.prior_pixel_sigma_px));
-    problem.AddResidualBlock(prior_cost.get(), nullptr, &line_delay_us);
   }
+  const auto out_of_range = [&](int j) {
+    return point_used[j] && (points(j, 2) < rho_low || points(j, 2) > rho_high);
+  };
+  // One Ceres solve over the used observations from the current values; bounded: the points'
+  // inverse depths held in [rho_low, rho_high]; stop: ends a free solve early.
+  const auto solve_once = [&](bool bounded, ceres::IterationCallback* stop) {
+    ceres::Problem::Options problem_options;
+    problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    problem_options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    ceres::Problem problem(problem_options);
+    auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+    problem.AddParameterBlock(intrinsics.data(), n_cam);
+    ordering->AddElementToGroup(intrinsics.data(), 1);
+    if (n_free_cam == 0) problem.SetParameterBlockConstant(intrinsics.data());
+    else if (intrinsics_manifold) problem.SetManifold(intrinsics.data(), intrinsics_manifold.get());
+    problem.AddParameterBlock(&line_delay_us, 1);
+    ordering->AddElementToGroup(&line_delay_us, 1);
+    if (!estimate_delay) problem.SetParameterBlockConstant(&line_delay_us);
+    for (int k = 0; k < num_keyframes; ++k) {
+      if (!involved[k] && k != 0) continue;
+      problem.AddParameterBlock(poses.row(k).data(), 6);
+      ordering->AddElementToGroup(poses.row(k).data(), 1);
+      if (k == 0) problem.SetParameterBlockConstant(poses.row(k).data());
+      else if (k == scale_keyframe) problem.SetManifold(poses.row(k).data(), &baseline_manifold);
+      else problem.SetManifold(poses.row(k).data(), &pose_manifold);
+    }
+    for (int j = 0; j < num_points; ++j) {
+      if (!point_used[j]) continue;
+      double* point = points.row(j).data();
+      problem.AddParameterBlock(point, 3);
+      ordering->AddElementToGroup(point, 0);
+      if (!bounded) continue;
+      if (std::isfinite(rho_low)) problem.SetParameterLowerBound(point, 2, rho_low);
+      if (std::isfinite(rho_high)) problem.SetParameterUpperBound(point, 2, rho_high);
+    }
+    for (int i = 0; i < n; ++i)
+      if (result.used[i]) problem.AddResidualBlock(costs[i].get(), loss.get(), blocks[i].blocks);
+    if (prior_cost) problem.AddResidualBlock(prior_cost.get(), nullptr, &line_delay_us);
 
-  ceres::Solver::Options solver_options;
-  solver_options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
-  if (options.linear_solver == "dense_schur") {
-    solver_options.linear_solver_type = ceres::DENSE_SCHUR;
-  } else if (options.linear_solver == "iterative_schur") {
-    solver_options.linear_solver_type = ceres::ITERATIVE_SCHUR;
-    solver_options.preconditioner_type = ceres::SCHUR_JACOBI;
-  } else {
-    solver_options.linear_solver_type = ceres::SPARSE_SCHUR;
-    solver_options.sparse_linear_algebra_library_type =
-        ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE
-                                                                              : ceres::EIGEN_SPARSE;
-  }
-  solver_options.linear_solver_ordering = ordering;
-  solver_options.max_num_iterations = options.max_iterations;
-  solver_options.function_tolerance = options.function_tolerance;
-  solver_options.gradient_tolerance = options.gradient_tolerance;
-  solver_options.parameter_tolerance = options.parameter_tolerance;
-  solver_options.num_threads = options.num_threads;
-  solver_options.minimizer_progress_to_stdout = options.verbose;
-  solver_options.logging_type = options.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
-  std::string why;
-  if (!solver_options.IsValid(&why)) throw InputError("bundle adjustment: " + why);
+    ceres::Solver::Options solver_options;
+    solver_options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+    if (options.linear_solver == "dense_schur") {
+      solver_options.linear_solver_type = ceres::DENSE_SCHUR;
+    } else if (options.linear_solver == "iterative_schur") {
+      solver_options.linear_solver_type = ceres::ITERATIVE_SCHUR;
+      solver_options.preconditioner_type = ceres::SCHUR_JACOBI;
+    } else {
+      solver_options.linear_solver_type = ceres::SPARSE_SCHUR;
+      solver_options.sparse_linear_algebra_library_type =
+          ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE)
+              ? ceres::SUITE_SPARSE
+              : ceres::EIGEN_SPARSE;
+    }
+    solver_options.linear_solver_ordering = ordering;
+    solver_options.max_num_iterations = options.max_iterations;
+    solver_options.function_tolerance = options.function_tolerance;
+    solver_options.gradient_tolerance = options.gradient_tolerance;
+    solver_options.parameter_tolerance = options.parameter_tolerance;
+    solver_options.num_threads = options.num_threads;
+    solver_options.minimizer_progress_to_stdout = options.verbose;
+    solver_options.logging_type = options.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
+    if (stop != nullptr) {
+      solver_options.callbacks.push_back(stop);
+      solver_options.update_state_every_iteration = true;  // the callback reads the points
+    }
+    std::string why;
+    if (!solver_options.IsValid(&why)) throw InputError("bundle adjustment: " + why);
+    ceres::Solver::Summary summary;
+    ceres::Solve(solver_options, &problem, &summary);
+    if (options.verbose) std::cout << summary.FullReport() << std::endl;
+    return summary;
+  };
+
+  // The covariance of the globals at the current values, and their remaining Gauss-Newton step
+  // (result.step_sigma).
+  const int num_globals_full = n_cam + 1;
+  const auto covariance = [&]() {
+    result.step_sigma = 0.0;
+    result.covariance_ok = false;
+    result.covariance_model = Eigen::MatrixXd::Zero(num_globals_full, num_globals_full);
+    result.covariance_tracks = result.covariance_model;
+    result.covariance_two_way = result.covariance_model;
+    result.remaining_step = Eigen::VectorXd::Zero(num_globals_full);
+
+    // The covariance of the globals (global_covariance.hpp) from each observation's Jacobians in
+    // the tangent spaces of its blocks.
+    const auto covariance_start = std::chrono::steady_clock::now();
+    std::vector<int> global_of;  // index in the full (n + 1) layout of each free global
+    for (int i = 0; i < n_cam; ++i)
+      if (free_param[i]) global_of.push_back(i);
+    if (estimate_delay) global_of.push_back(n_cam);
+    const int ng = static_cast<int>(global_of.size());
+    UnknownLayout layout;
+    layout.num_globals = ng;
+    layout.num_points = num_points;
+    layout.pose_size.assign(num_keyframes, 0);
+    std::vector<Eigen::Matrix<double, 6, 6, Eigen::RowMajor>> plus_jacobian(num_keyframes);
+    for (int k = 1; k < num_keyframes; ++k) {
+      if (!involved[k]) continue;
+      plus_jacobian[k].setZero();
+      if (k == scale_keyframe) {
+        layout.pose_size[k] = 5;
+        Eigen::Matrix<double, 6, 5, Eigen::RowMajor> jacobian;
+        baseline_manifold.PlusJacobian(poses.row(k).data(), jacobian.data());
+        plus_jacobian[k].leftCols(5) = jacobian;
+      } else {
+        layout.pose_size[k] = 6;
+        pose_manifold.PlusJacobian(poses.row(k).data(), plus_jacobian[k].data());
+      }
+    }
+    std::vector<int> used_index;
+    for (int i = 0; i < n; ++i)
+      if (result.used[i]) used_index.push_back(i);
+    std::vector<ObservationLinearisation> linearised(used_index.size());
+    std::vector<char> failed(used_index.size(), 0);
+    const auto linearise = [&](size_t first, size_t last) {
+      Eigen::Matrix<double, 2, 6, Eigen::RowMajor> d_anchor, d_observer;
+      Eigen::Matrix<double, 2, 3, Eigen::RowMajor> d_point;
+      Eigen::Vector2d d_delay;
+      for (size_t u = first; u < last; ++u) {
+        const int i = used_index[u];
+        auto& out = linearised[u];
+        const int k = obs.keyframe[i], j = obs.point[i], a = data.point_anchor[j];
+        double residual[2];
+        Eigen::Matrix<double, 2, Eigen::Dynamic, Eigen::RowMajor> d_cam(2, n_cam);
+        std::vector<double*> jacobians;
+        if (blocks[i].in_anchor) jacobians = {d_cam.data(), d_point.data(), d_delay.data()};
+        else
+          jacobians = {d_cam.data(), d_anchor.data(), d_observer.data(), d_point.data(),
+                       d_delay.data()};
+        if (!costs[i]->Evaluate(blocks[i].blocks.data(), residual, jacobians.data())) {
+          failed[u] = 1;
+          continue;
+        }
+        out.point = j;
+        out.keyframe = k;
+        out.residual << residual[0], residual[1];
+        out.weight = 1.0;
+        if (loss != nullptr) {
+          double rho[3];
+          loss->Evaluate(out.residual.squaredNorm(), rho);
+          out.weight = rho[1];
+        }
+        out.d_r_d_globals.resize(2, ng);
+        for (int g = 0; g < ng; ++g)
+          out.d_r_d_globals.col(g) = global_of[g] < n_cam ? d_cam.col(global_of[g]) : d_delay;
+        out.d_r_d_point = d_point;
+        if (blocks[i].in_anchor) continue;
+        const int pose_keyframe[2] = {a, k};
+        const Eigen::Matrix<double, 2, 6, Eigen::RowMajor>* ambient[2] = {&d_anchor, &d_observer};
+        for (int s = 0; s < 2; ++s) {
+          if (layout.pose_size[pose_keyframe[s]] == 0) continue;
+          out.pose[s] = pose_keyframe[s];
+          out.d_r_d_pose[s] = *ambient[s] * plus_jacobian[pose_keyframe[s]];
+        }
+      }
+    };
+    {
+      const size_t total = used_index.size();
+      const int workers = static_cast<int>(std::min<size_t>(options.num_threads, total / 256 + 1));
+      std::vector<std::thread> threads;
+      for (int w = 1; w < workers; ++w)
+        threads.emplace_back(linearise, total * w / workers, total * (w + 1) / workers);
+      linearise(0, total / workers);
+      for (auto& thread : threads) thread.join();
+    }
+    if (std::any_of(failed.begin(), failed.end(), [](char f) { return f != 0; })) {
+      result.message += "; the covariance was not computed: a residual could not be evaluated";
+      return;
+    }
+    std::vector<GlobalPrior> priors;
+    if (data.line_delay.mode == LineDelayMode::kPrior) {
+      const double information = prior_weight * prior_weight;
+      priors.push_back({ng - 1, information,
+                        information * options.prior_pixel_sigma_px * options.prior_pixel_sigma_px});
+    }
+    const auto linearised_at = std::chrono::steady_clock::now();
+    const GlobalCovariances cov = ComputeGlobalCovariances(layout, linearised, priors);
+    if (options.verbose)
+      std::cout
+          << "covariance: linearisation "
+          << std::chrono::duration<double>(linearised_at - covariance_start).count()
+          << " s, Schur complements and clusters "
+          << std::chrono::duration<double>(std::chrono::steady_clock::now() - linearised_at).count()
+          << " s" << std::endl;
+    // Back to the full layout, the line delay in s/row.
+    Eigen::VectorXd unit = Eigen::VectorXd::Ones(ng);
+    if (estimate_delay) unit[ng - 1] = kMicroseconds;
+    const auto expand = [&](const Eigen::MatrixXd& small) {
+      Eigen::MatrixXd full = Eigen::MatrixXd::Zero(num_globals_full, num_globals_full);
+      for (int r = 0; r < ng; ++r)
+        for (int c = 0; c < ng; ++c)
+          full(global_of[r], global_of[c]) = small(r, c) * unit[r] * unit[c];
+      return full;
+    };
+    result.covariance_model = expand(cov.model);
+    result.covariance_tracks = expand(cov.by_track);
+    result.covariance_two_way = expand(cov.two_way);
+    for (int g = 0; g < ng; ++g) {
+      result.remaining_step[global_of[g]] = cov.step[g] * unit[g];
+      const double sigma = std::sqrt(std::max(cov.model(g, g), 0.0));
+      result.step_sigma =
+          std::max(result.step_sigma, sigma > 0.0 ? std::abs(cov.step[g]) / sigma
+                                                  : std::numeric_limits<double>::infinity());
+    }
+    result.sigma_px = cov.sigma_px;
+    result.dof = cov.dof;
+    result.covariance_ok = cov.full_rank && result.covariance_model.allFinite() &&
+                           result.covariance_two_way.allFinite();
+    result.covariance_time_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - covariance_start).count();
+  };
+
+  double solve_time_s = 0.0;
+  int iterations = 0;
+  double first_cost = std::numeric_limits<double>::quiet_NaN();
+  const auto account = [&](const ceres::Solver::Summary& s) {
+    if (std::isnan(first_cost)) first_cost = s.initial_cost;
+    solve_time_s += s.total_time_in_seconds;
+    iterations += static_cast<int>(s.iterations.size()) - 1;
+  };
+  const auto solve = [&](bool bounded, ceres::IterationCallback* stop) {
+    const ceres::Solver::Summary summary = solve_once(bounded, stop);
+    account(summary);
+    return summary;
+  };
+
+  // The points free first (docs/sog.md §23): Ceres' bounds cost a projected line search, with a
+  // Jacobian evaluation, in every iteration, and one point held at a bound made a 30 s walk's solve
+  // crawl (4x slower). Points that end outside the range are outliers and are dropped, the solve
+  // going on from there, while they are few (max_out_of_range_share); more, or a failed solve:
+  // again from the start with Ceres' bounds (a camera only turning: depths not observed).
+  const bool has_bounds = std::isfinite(rho_low) || std::isfinite(rho_high);
+  int points_in_solve = 0;
+  for (int j = 0; j < num_points; ++j) points_in_solve += point_used[j] ? 1 : 0;
+  const int max_out_of_range =
+      static_cast<int>(std::floor(options.max_out_of_range_share * points_in_solve));
+  struct TooManyOutOfRange : ceres::IterationCallback {
+    std::function<int()> count;
+    int limit = 0;
+    ceres::CallbackReturnType operator()(const ceres::IterationSummary&) override {
+      return count() > limit ? ceres::SOLVER_ABORT : ceres::SOLVER_CONTINUE;
+    }
+  };
   ceres::Solver::Summary summary;
-  ceres::Solve(solver_options, &problem, &summary);
-  if (options.verbose) std::cout << summary.FullReport() << std::endl;
-
+  bool solved_free = false;
+  if (has_bounds && options.free_points_first) {
+    const std::vector<double> start_globals = globals;
+    const AnchoredPointMatrix start_points = points;
+    const auto start_used = result.used;
+    const std::vector<bool> start_point_used = point_used;
+    TooManyOutOfRange stop;
+    int dropped = 0;
+    stop.count = [&] {
+      int c = 0;
+      for (int j = 0; j < num_points; ++j) c += out_of_range(j) ? 1 : 0;
+      return c;
+    };
+    for (int round = 0; round < kMaxDropRounds; ++round) {
+      stop.limit = max_out_of_range - dropped;
+      summary = solve(false, &stop);
+      if (summary.termination_type == ceres::USER_FAILURE ||
+          summary.termination_type == ceres::FAILURE)
+        break;
+      std::vector<int> out;
+      for (int j = 0; j < num_points; ++j)
+        if (out_of_range(j)) out.push_back(j);
+      if (out.empty()) {
+        solved_free = true;
+        break;
+      }
+      if (dropped + static_cast<int>(out.size()) > max_out_of_range) break;
+      for (int j : out) point_used[j] = false;
+      for (int i = 0; i < n; ++i) result.used[i] = result.used[i] && point_used[obs.point[i]];
+      dropped += static_cast<int>(out.size());
+      // A keyframe left without observations would make the covariance singular: bounded instead.
+      std::vector<bool> still(num_keyframes, false);
+      for (int i = 0; i < n; ++i) {
+        if (!result.used[i]) continue;
+        still[obs.keyframe[i]] = true;
+        if (!blocks[i].in_anchor) still[data.point_anchor[obs.point[i]]] = true;
+      }
+      if (still != involved) break;
+    }
+    if (solved_free) {
+      result.points_out_of_range = dropped;
+    } else {  // back to the start, bounded
+      globals = start_globals;
+      points = start_points;
+      result.used = start_used;
+      point_used = start_point_used;
+      result.message =
+          "points left their range in the free solve: solved with bounds from the start; ";
+    }
+  }
+  if (!solved_free) {
+    summary = solve(true, nullptr);
+  }
+  result.solved_with_bounds = has_bounds && !solved_free;
   result.termination = ceres::TerminationTypeToString(summary.termination_type);
   result.converged = summary.termination_type == ceres::CONVERGENCE;
-  result.iterations = static_cast<int>(summary.iterations.size()) - 1;
-  result.initial_cost = summary.initial_cost;
+  result.iterations = iterations;
+  result.initial_cost = first_cost;
   result.final_cost = summary.final_cost;
-  result.message = summary.message;
-  result.solve_time_s = summary.total_time_in_seconds;
+  result.message += summary.message;
+  result.solve_time_s = solve_time_s;
   result.camera_params = intrinsics;
   result.line_delay_s = line_delay_us * kMicroseconds;
   result.keyframe_poses = poses;
@@ -414,140 +657,7 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
   }
   result.rms_px = std::sqrt(sum_sq / std::max(1, 2 * num_used));
 
-  const int num_globals_full = n_cam + 1;
-  result.covariance_model = Eigen::MatrixXd::Zero(num_globals_full, num_globals_full);
-  result.covariance_tracks = result.covariance_model;
-  result.covariance_two_way = result.covariance_model;
-  result.remaining_step = Eigen::VectorXd::Zero(num_globals_full);
-  if (!options.compute_covariance) return result;
-
-  // The covariance of the globals (global_covariance.hpp) from each observation's Jacobians in
-  // the tangent spaces of its blocks.
-  const auto covariance_start = std::chrono::steady_clock::now();
-  std::vector<int> global_of;  // index in the full (n + 1) layout of each free global
-  for (int i = 0; i < n_cam; ++i)
-    if (free_param[i]) global_of.push_back(i);
-  if (estimate_delay) global_of.push_back(n_cam);
-  const int ng = static_cast<int>(global_of.size());
-  UnknownLayout layout;
-  layout.num_globals = ng;
-  layout.num_points = num_points;
-  layout.pose_size.assign(num_keyframes, 0);
-  std::vector<Eigen::Matrix<double, 6, 6, Eigen::RowMajor>> plus_jacobian(num_keyframes);
-  for (int k = 1; k < num_keyframes; ++k) {
-    if (!involved[k]) continue;
-    plus_jacobian[k].setZero();
-    if (k == scale_keyframe) {
-      layout.pose_size[k] = 5;
-      Eigen::Matrix<double, 6, 5, Eigen::RowMajor> jacobian;
-      baseline_manifold.PlusJacobian(poses.row(k).data(), jacobian.data());
-      plus_jacobian[k].leftCols(5) = jacobian;
-    } else {
-      layout.pose_size[k] = 6;
-      pose_manifold.PlusJacobian(poses.row(k).data(), plus_jacobian[k].data());
-    }
-  }
-  std::vector<int> used_index;
-  for (int i = 0; i < n; ++i)
-    if (result.used[i]) used_index.push_back(i);
-  std::vector<ObservationLinearisation> linearised(used_index.size());
-  std::vector<char> failed(used_index.size(), 0);
-  const auto linearise = [&](size_t first, size_t last) {
-    Eigen::Matrix<double, 2, 6, Eigen::RowMajor> d_anchor, d_observer;
-    Eigen::Matrix<double, 2, 3, Eigen::RowMajor> d_point;
-    Eigen::Vector2d d_delay;
-    for (size_t u = first; u < last; ++u) {
-      const int i = used_index[u];
-      auto& out = linearised[u];
-      const int k = obs.keyframe[i], j = obs.point[i], a = data.point_anchor[j];
-      double residual[2];
-      Eigen::Matrix<double, 2, Eigen::Dynamic, Eigen::RowMajor> d_cam(2, n_cam);
-      std::vector<double*> jacobians;
-      if (blocks[i].in_anchor) jacobians = {d_cam.data(), d_point.data(), d_delay.data()};
-      else
-        jacobians = {d_cam.data(), d_anchor.data(), d_observer.data(), d_point.data(),
-                     d_delay.data()};
-      if (!costs[i]->Evaluate(blocks[i].blocks.data(), residual, jacobians.data())) {
-        failed[u] = 1;
-        continue;
-      }
-      out.point = j;
-      out.keyframe = k;
-      out.residual << residual[0], residual[1];
-      out.weight = 1.0;
-      if (loss != nullptr) {
-        double rho[3];
-        loss->Evaluate(out.residual.squaredNorm(), rho);
-        out.weight = rho[1];
-      }
-      out.d_r_d_globals.resize(2, ng);
-      for (int g = 0; g < ng; ++g)
-        out.d_r_d_globals.col(g) = global_of[g] < n_cam ? d_cam.col(global_of[g]) : d_delay;
-      out.d_r_d_point = d_point;
-      if (blocks[i].in_anchor) continue;
-      const int pose_keyframe[2] = {a, k};
-      const Eigen::Matrix<double, 2, 6, Eigen::RowMajor>* ambient[2] = {&d_anchor, &d_observer};
-      for (int s = 0; s < 2; ++s) {
-        if (layout.pose_size[pose_keyframe[s]] == 0) continue;
-        out.pose[s] = pose_keyframe[s];
-        out.d_r_d_pose[s] = *ambient[s] * plus_jacobian[pose_keyframe[s]];
-      }
-    }
-  };
-  {
-    const size_t total = used_index.size();
-    const int workers = static_cast<int>(std::min<size_t>(options.num_threads, total / 256 + 1));
-    std::vector<std::thread> threads;
-    for (int w = 1; w < workers; ++w)
-      threads.emplace_back(linearise, total * w / workers, total * (w + 1) / workers);
-    linearise(0, total / workers);
-    for (auto& thread : threads) thread.join();
-  }
-  if (std::any_of(failed.begin(), failed.end(), [](char f) { return f != 0; })) {
-    result.message += "; the covariance was not computed: a residual could not be evaluated";
-    return result;
-  }
-  std::vector<GlobalPrior> priors;
-  if (data.line_delay.mode == LineDelayMode::kPrior) {
-    const double information = prior_weight * prior_weight;
-    priors.push_back({ng - 1, information,
-                      information * options.prior_pixel_sigma_px * options.prior_pixel_sigma_px});
-  }
-  const auto linearised_at = std::chrono::steady_clock::now();
-  const GlobalCovariances cov = ComputeGlobalCovariances(layout, linearised, priors);
-  if (options.verbose)
-    std::cout
-        << "covariance: linearisation "
-        << std::chrono::duration<double>(linearised_at - covariance_start).count()
-        << " s, Schur complements and clusters "
-        << std::chrono::duration<double>(std::chrono::steady_clock::now() - linearised_at).count()
-        << " s" << std::endl;
-  // Back to the full layout, the line delay in s/row.
-  Eigen::VectorXd unit = Eigen::VectorXd::Ones(ng);
-  if (estimate_delay) unit[ng - 1] = kMicroseconds;
-  const auto expand = [&](const Eigen::MatrixXd& small) {
-    Eigen::MatrixXd full = Eigen::MatrixXd::Zero(num_globals_full, num_globals_full);
-    for (int r = 0; r < ng; ++r)
-      for (int c = 0; c < ng; ++c)
-        full(global_of[r], global_of[c]) = small(r, c) * unit[r] * unit[c];
-    return full;
-  };
-  result.covariance_model = expand(cov.model);
-  result.covariance_tracks = expand(cov.by_track);
-  result.covariance_two_way = expand(cov.two_way);
-  for (int g = 0; g < ng; ++g) {
-    result.remaining_step[global_of[g]] = cov.step[g] * unit[g];
-    const double sigma = std::sqrt(std::max(cov.model(g, g), 0.0));
-    result.step_sigma =
-        std::max(result.step_sigma, sigma > 0.0 ? std::abs(cov.step[g]) / sigma
-                                                : std::numeric_limits<double>::infinity());
-  }
-  result.sigma_px = cov.sigma_px;
-  result.dof = cov.dof;
-  result.covariance_ok =
-      cov.full_rank && result.covariance_model.allFinite() && result.covariance_two_way.allFinite();
-  result.covariance_time_s =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - covariance_start).count();
+  if (options.compute_covariance) covariance();
   return result;
 }
 

@@ -83,6 +83,8 @@ class AdjustmentResult:
     dropped_points: int
     scale_keyframe: int
     points_at_bounds: int
+    points_out_of_range: int = 0      # dropped for ending outside the inverse-depth bounds (free solve)
+    solved_with_bounds: bool = False  # Ceres' bounds gave the result (too many points left the range)
 
     @property
     def camera_params(self) -> np.ndarray:
@@ -207,4 +209,5 @@ def adjust(tracks: KeyframeTracks, camera: _core.CameraModel, *,
         solve_time_s=result.solve_time_s, covariance_time_s=result.covariance_time_s,
         covariance_ok=result.covariance_ok, step_sigma=result.step_sigma,
         dropped_observations=result.dropped_observations, dropped_points=result.dropped_points,
-        scale_keyframe=result.scale_keyframe, points_at_bounds=result.points_at_bounds)
+        scale_keyframe=result.scale_keyframe, points_at_bounds=result.points_at_bounds,
+        points_out_of_range=result.points_out_of_range, solved_with_bounds=result.solved_with_bounds)

@@ -9,6 +9,7 @@ camera and poses (:mod:`rscalib.selfcalib.keyframes`), and the judgement
 from __future__ import annotations
 
 import contextlib
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable, Iterable, Iterator, Optional
 
 import cv2
@@ -259,10 +260,15 @@ def _adjust(tracks: TrackSet, states: list, camera0: CameraModel, options: SelfC
                 camera0 = quick.camera
                 if "estimate_line_delay" in solve:
                     solve = dict(solve, line_delay_s=float(quick.line_delay_s))
-        adj = adjust(adjustment_start(observations, poses, camera0), camera0, **solve)
+        # The whole and the self-check's halves side by side (the solver releases the GIL): the
+        # halves start where the whole does, from the quick answer, and converge to their own minima.
+        with ThreadPoolExecutor(2) as pool:
+            halves_done = pool.submit(_halves_check, observations, poses, camera0, solve)
+            adj = adjust(adjustment_start(observations, poses, camera0), camera0, **solve)
+            self_check = halves_done.result()
     except (ValueError, np.linalg.LinAlgError) as error:   # InputError is a ValueError
         return None, str(error), used, None
-    return adj, "", used, _halves_check(observations, poses, adj, solve)
+    return adj, "", used, self_check
 
 
 def _widened(adj: AdjustmentResult, factors: np.ndarray) -> AdjustmentResult:
@@ -276,17 +282,15 @@ def _widened(adj: AdjustmentResult, factors: np.ndarray) -> AdjustmentResult:
     return replace(adj, covariance_two_way=covariance, bounds_99_two_way=np.c_[estimate - half, estimate + half])
 
 
-def _halves_check(observations, poses: FilterPoses, whole: AdjustmentResult, solve: dict) -> Optional[dict]:
+def _halves_check(observations, poses, camera: CameraModel, solve: dict) -> Optional[dict]:
     """The self-check (docs/sog.md §24): the first and the second half of the keyframes adjusted
-    apart, from the whole's camera. Per parameter z = |a - b| / sqrt(sa^2 + sb^2) of the halves'
+    apart, one after the other (beside the whole), from the whole's start (``camera``, ``poses``).
+    Per parameter z = |a - b| / sqrt(sa^2 + sb^2) of the halves'
     estimates with their (two-way clustered) sigmas; when the halves scatter more than their sigmas
     say (z > 1) the whole's sigma is too small by about that factor (the Birge ratio, as the line
     delay's self-check: docs/formulation.md §9). Every parameter is widened by the largest z: a misfit
     seen in one parameter reaches the others through their correlations, in shares the check cannot
     tell (docs/sog.md §24). None when a half cannot be adjusted."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    camera = whole.camera
     parts = halves(observations, MIN_TRACK_KEYFRAMES)
     if any(len(part) == 0 for part in parts):
         return None
@@ -297,8 +301,7 @@ def _halves_check(observations, poses: FilterPoses, whole: AdjustmentResult, sol
         except (ValueError, np.linalg.LinAlgError):
             return None
 
-    with ThreadPoolExecutor(len(parts)) as pool:   # the solver releases the GIL: one core each
-        results = list(pool.map(adjusted, parts))
+    results = [adjusted(part) for part in parts]
     estimates, sigmas = [], []
     for half in results:
         if half is None or not (half.converged and half.covariance_ok):
@@ -308,7 +311,7 @@ def _halves_check(observations, poses: FilterPoses, whole: AdjustmentResult, sol
     (a, b), (sa, sb) = estimates, sigmas
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.where((sa > 0) & (sb > 0), np.abs(a - b) / np.hypot(sa, sb), 0.0)
-    names = list(whole.names)
+    names = list(results[0].names)
     return {"names": names, "halves": [e.tolist() for e in estimates], "sigmas": [s.tolist() for s in sigmas],
             "z": z.tolist(), "widen": [float(max(1.0, z.max(initial=0.0)))] * len(z)}
 

@@ -120,7 +120,7 @@ def judge_adjustment(adj: Optional[AdjustmentResult], error: str, prior_bounds: 
     half = 0.5 * float(hi - lo) / f if f > 0 else np.inf
     spread = (f"f {f:.1f} px, 99 % [{lo:.1f}, {hi:.1f}] (+-{100 * half:.1f} %, clustered by feature track and "
               "keyframe)")
-    points = int(len(adj.point_anchor)) - int(adj.dropped_points)
+    points = int(len(adj.point_anchor)) - int(adj.dropped_points) - int(adj.points_out_of_range)
     problem = ""
     if not adj.converged:
         far = f"{adj.step_sigma:.2f} sigma" if adj.step_sigma < 1e3 else "over 1000 sigma (near-singular)"

@@ -137,4 +137,5 @@ def adjustment_summary(adj: AdjustmentResult) -> dict:
             if np.any(adj.used) else None,
             "sigma_px": fin(adj.sigma_px), "rms_px": fin(adj.rms_px), "converged": bool(adj.converged),
             "termination": adj.termination, "iterations": int(adj.iterations), "solve_time_s": fin(adj.solve_time_s),
-            "step_sigma": fin(adj.step_sigma), "dropped_points": int(adj.dropped_points)}
+            "step_sigma": fin(adj.step_sigma), "dropped_points": int(adj.dropped_points),
+            "points_out_of_range": int(adj.points_out_of_range), "solved_with_bounds": bool(adj.solved_with_bounds)}

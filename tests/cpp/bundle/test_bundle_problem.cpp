@@ -153,6 +153,18 @@ TEST(SolveBundle, ACameraOnlyTurningKeepsItsPointsInRange) {
   ASSERT_TRUE(result.converged) << result.message;
   ExpectInsideBounds(result, scene.camera.params(), 0.0, result.covariance_model, "model");
   EXPECT_GT(result.points_at_bounds, 0);
+  // many points left their range in the free solve: the answer is that of Ceres' bounds from the
+  // start, as with the free solve off
+  EXPECT_TRUE(result.solved_with_bounds);
+  EXPECT_EQ(result.points_out_of_range, 0);
+  BundleOptions ceres_bounds;
+  ceres_bounds.free_points_first = false;
+  const BundleResult bounded =
+      SolveBundle(WithParams(scene.camera, start), scene.data, ceres_bounds);
+  for (int i = 0; i < 5; ++i)
+    EXPECT_NEAR(result.camera_params[i], bounded.camera_params[i],
+                1e-9 * std::abs(bounded.camera_params[i]))
+        << "camera parameter " << i;
   const double median = 1.0 / 3.0;  // about: the room's walls 2-4 m away, the scale as the start's
   EXPECT_LE(result.points.col(2).maxCoeff(), 100.0 * median * 2.0);
   BundleOptions unbounded;
@@ -163,6 +175,52 @@ TEST(SolveBundle, ACameraOnlyTurningKeepsItsPointsInRange) {
       SolveBundle(WithParams(scene.camera, start), scene.data, unbounded);
   EXPECT_GT(wandering.points.col(2).cwiseAbs().maxCoeff(),
             result.points.col(2).cwiseAbs().maxCoeff());
+}
+
+// One track whose motion fits a point far beyond infinity (rho = -0.6 of the median, the bound is
+// -0.1): the free solve drops it as an outlier instead of holding it at the bound, and the camera
+// is that of the other points; with the free solve off (Ceres' bounds) it stays, at its bound.
+TEST(SolveBundle, APointBeyondInfinityIsDroppedInTheFreeSolve) {
+  Scene scene = MakeScene(SceneOptions());
+  auto& data = scene.data;
+  std::vector<int> seen(data.points.rows(), 0);
+  for (Eigen::Index i = 0; i < data.observations.point.size(); ++i)
+    ++seen[data.observations.point[i]];
+  const int bad = static_cast<int>(std::max_element(seen.begin(), seen.end()) - seen.begin());
+  std::vector<double> rho(data.points.col(2).data(),
+                          data.points.col(2).data() + data.points.rows());
+  std::nth_element(rho.begin(), rho.begin() + rho.size() / 2, rho.end());
+  const Eigen::Vector3d beyond(data.points(bad, 0), data.points(bad, 1),
+                               -0.6 * rho[rho.size() / 2]);
+  const int anchor = data.point_anchor[bad];
+  for (Eigen::Index i = 0; i < data.observations.point.size(); ++i) {
+    if (data.observations.point[i] != bad) continue;
+    Eigen::Vector3d h;
+    AnchoredPointInCamera(data.keyframe_poses.row(anchor).data(),
+                          data.keyframe_poses.row(data.observations.keyframe[i]).data(),
+                          beyond.data(), h.data());
+    Eigen::Vector2d uv;
+    ASSERT_TRUE(h[2] > 0.0 && scene.camera.Project(h, &uv));
+    data.observations.uv_px.row(i) = uv.transpose();
+  }
+  Eigen::VectorXd start;
+  PerturbStart(&scene, &start, 16);
+  BundleOptions solve;
+  solve.robust_loss_scale_px = 1.0;
+  const BundleResult result = SolveBundle(WithParams(scene.camera, start), scene.data, solve);
+  ASSERT_TRUE(result.converged) << result.message;
+  EXPECT_FALSE(result.solved_with_bounds);
+  EXPECT_EQ(result.points_out_of_range, 1);
+  EXPECT_EQ(result.points_at_bounds, 0);
+  for (Eigen::Index i = 0; i < data.observations.point.size(); ++i)
+    EXPECT_EQ(result.used[i], data.observations.point[i] != bad);
+  ExpectInsideBounds(result, scene.camera.params(), 0.0, result.covariance_two_way, "two-way");
+  solve.free_points_first = false;
+  const BundleResult held = SolveBundle(WithParams(scene.camera, start), scene.data, solve);
+  EXPECT_TRUE(held.solved_with_bounds);
+  EXPECT_EQ(held.points_out_of_range, 0);
+  EXPECT_GE(held.points_at_bounds, 1);
+  EXPECT_EQ(held.used.count(), held.used.size());  // the point stays in the solve, at its bound
 }
 
 // The covariances from the Schur complements against dense ones from Ceres' Jacobian of the

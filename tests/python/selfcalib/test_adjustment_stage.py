@@ -155,7 +155,8 @@ def _adjustment(f=200.0, f_half=2.0, converged=True, covariance_ok=True, points=
     d = 0.0 if line_delay is None else line_delay[0]
     d_bounds = [d, d] if line_delay is None else list(line_delay[1])
     return SimpleNamespace(camera_params=camera, bounds_99_two_way=np.r_[bounds, [d_bounds]],
-                           point_anchor=np.zeros(points, int), dropped_points=0, converged=converged,
+                           point_anchor=np.zeros(points, int), dropped_points=0, points_out_of_range=0,
+                           converged=converged,
                            step_sigma=12.0, message="no convergence", covariance_ok=covariance_ok,
                            estimates_line_delay=line_delay is not None, line_delay_s=d,
                            keyframe_poses=np.zeros((40, 6)), sigma_px=0.4)

@@ -53,7 +53,7 @@ struct BundleOptions {
   std::string robust_loss = "soft_l1";  // none | huber | cauchy | soft_l1 (Ceres' losses)
   double robust_loss_scale_px = 2.0;    // where the loss leaves its quadratic part
   int max_iterations = 200;
-  double function_tolerance = 1e-12;
+  double function_tolerance = 1e-9;  // the globals' remaining step <= 0.001 sigma (sog.md §23)
   double gradient_tolerance = 1e-12;
   double parameter_tolerance = 1e-10;
   int num_threads = 2;
@@ -63,7 +63,12 @@ struct BundleOptions {
   // beyond_infinity_limit m beyond infinity (rho >= -beyond_infinity_limit m). <= 0 / < 0: none.
   double near_limit = 0.01;
   double beyond_infinity_limit = 0.1;
-  int scale_keyframe = -1;            // -1: the keyframe farthest from the first at the start
+  int scale_keyframe = -1;  // -1: the keyframe farthest from the first at the start
+  // Solve with the points free first: points that end outside the bounds above are dropped as
+  // outliers while they are at most max_out_of_range_share of the points; more: solved again from
+  // the start with Ceres' bounds (docs/sog.md §23). false: Ceres' bounds from the start.
+  bool free_points_first = true;
+  double max_out_of_range_share = 0.01;
   double prior_pixel_sigma_px = 0.5;  // the pixel noise a line-delay prior is weighed against
   bool compute_covariance = true;
   bool verbose = false;  // Ceres' per-iteration log to stderr
@@ -88,7 +93,9 @@ struct BundleResult {
   double beyond_infinity_limit = 0.1;
   int scale_keyframe = -1;         // the keyframe whose distance from the first was held
   int points_beyond_infinity = 0;  // rho < 0 at the end (far points' noise)
-  int points_at_bounds = 0;  // rho at a bound (BundleOptions::near_limit, beyond_infinity_limit)
+  int points_at_bounds = 0;     // rho at a bound (BundleOptions::near_limit, beyond_infinity_limit)
+  int points_out_of_range = 0;  // ended outside the bounds in the free solve: dropped
+  bool solved_with_bounds = false;  // Ceres' bounds gave the result (too many left the range)
   // Ceres' summary.
   std::string termination;  // CONVERGENCE | NO_CONVERGENCE | FAILURE | ...
   bool converged = false;
