@@ -23,90 +23,19 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-NAMES = ("f", "cx", "cy", "k1", "k2")
-STYLES = ("walk-forward", "look-around", "sideways-dolly")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import SELFCALIB_PARAMS as NAMES  # noqa: E402  (benchmarks/_common.py)
+from _common import SELFCALIB_STYLES as STYLES  # noqa: E402
+from _common import run_selfcalib as run_one  # noqa: E402
+from _common import selfcalib_pixel_size_mm as pixel_size_mm  # noqa: E402
+
 SIZES = ((320, 240), (640, 480))
 REPO = Path(__file__).resolve().parents[1]
-
-
-def pixel_size_mm(width: int) -> float:
-    from rscalib.reference_cameras import PAPER_PIXEL_SIZE_MM, PHONE_PIXEL_SIZE_MM
-    return PAPER_PIXEL_SIZE_MM if width == 320 else PHONE_PIXEL_SIZE_MM
-
-
-def run_one(style: str, size: tuple[int, int], seed: int, frames: int, cache: str, rolling_shutter: str = "none",
-            tag: str = "") -> dict:
-    from rscalib.sim.scene_realism import render_realistic_scene
-
-    seq = Path(cache) / f"{style}_{size[0]}x{size[1]}_s{seed}_n{frames}"
-    render_s = 0.0
-    if not (seq / "truth.json").exists():  # truth.json is written last
-        render_s = render_realistic_scene(seq, style, size, frames, seed).elapsed_s
-    truth = json.loads((seq / "truth.json").read_text())
-    out = Path(cache) / f"runs{tag}" / seq.name
-    cmd = [sys.executable, "-m", "rscalib", "selfcalib", str(seq), "--pixel-size-mm", str(pixel_size_mm(size[0])),
-           "--out", str(out), "--quiet"]
-    if rolling_shutter == "truth":   # as measured by `rscalib linedelay` (0.15 % median error, docs/benchmarks.md)
-        cmd += ["--line-delay", repr(float(truth["line_delay_s"]))]
-    log = Path(cache) / f"runs{tag}" / f"{seq.name}.log"
-    log.parent.mkdir(parents=True, exist_ok=True)
-    started = time.perf_counter()
-    rss_file = log.with_suffix(".maxrss")
-    # Peak RSS through /usr/bin/time: a child forked from this (large) worker would inherit the
-    # worker's high-water mark across exec (Linux keeps it), so getrusage/wait4 here overstate it.
-    with open(log, "w") as sink:
-        code = subprocess.run(["/usr/bin/time", "-f", "%M", "-o", str(rss_file), *cmd], stdout=sink,
-                              stderr=subprocess.STDOUT).returncode
-    wall_s = time.perf_counter() - started
-    stderr = log.read_text()
-    row = {"style": style, "size": f"{size[0]}x{size[1]}", "seed": seed, "frames": truth["num_frames_rendered"],
-           "command": " ".join(cmd), "exit": code, "wall_s": round(wall_s, 1),
-           "peak_rss_mb": round(int(rss_file.read_text().split()[-1]) / 1024, 1),
-           "render_s": round(render_s, 1), "textures": truth["textures"], "codec": truth["codec_used"],
-           "truth": dict(zip(NAMES, truth["camera"]["params"])), "output_tail": stderr[-400:]}
-    result_path = out / "result.json"
-    if result_path.exists():
-        result = json.loads(result_path.read_text())
-        # not determined: result.json claims no number; the estimate is kept under not_claimed
-        result |= {n: v for n, v in (result.get("not_claimed") or {}).items() if result.get(n) is None}
-        row["estimate"] = {n: result[n] for n in NAMES}
-        row["bounds_99"] = {n: result[f"{n}_bounds_99"] for n in NAMES}
-        row["filter_bounds_99"] = dict(zip(NAMES, result.get("filter_bounds_99", [None] * 5)))
-        row["determined"] = bool(result.get("determined"))
-        row["reason"] = result.get("reason", "")
-        row["gaussians_left"] = result.get("gaussians_left")
-        row["frames_per_s"] = result.get("frames_per_s")
-        row["inside"] = {n: bool(row["bounds_99"][n][0] <= row["truth"][n] <= row["bounds_99"][n][1]) for n in NAMES}
-        fb = row["filter_bounds_99"]
-        row["inside_filter"] = {n: bool(fb[n] is not None and fb[n][0] <= row["truth"][n] <= fb[n][1]) for n in NAMES}
-        row["f_error_pct"] = 100.0 * (result["f"] / row["truth"]["f"] - 1.0)
-        row["estimate_from"] = result.get("estimate_from", "filter")
-        if result.get("filter"):
-            row["filter_f_error_pct"] = 100.0 * (result["filter"]["f"] / row["truth"]["f"] - 1.0)
-        adj = result.get("adjustment")
-        if adj:   # the bundle adjustment (docs/sog.md §24), whatever the verdict
-            est = dict(zip(adj["names"], adj["estimate"]))
-            bb = dict(zip(adj["names"], adj["bounds_99"]))
-            row["bundle"] = {n: est[n] for n in NAMES}
-            row["bundle_bounds_99"] = {n: bb[n] for n in NAMES}
-            row["inside_bundle"] = {n: bool(bb[n][0] is not None and bb[n][0] <= row["truth"][n] <= bb[n][1])
-                                    for n in NAMES}
-            row["bundle_f_half_width_pct"] = 50.0 * (bb["f"][1] - bb["f"][0]) / est["f"] if bb["f"][0] else None
-            row["bundle_s"] = adj.get("solve_time_s")
-            row["bundle_converged"] = adj.get("converged")
-            row["bundle_f_error_pct"] = 100.0 * (est["f"] / row["truth"]["f"] - 1.0)
-            if adj.get("line_delay_estimated"):
-                row["line_delay_s"] = {"truth": float(truth["line_delay_s"]), "bundle": est["line_delay_s"],
-                                       "bounds_99": bb["line_delay_s"]}
-            row["tracks"] = {k: result.get("tracks", {}).get(k) for k in ("adjustment_tracks", "adjustment_keyframes",
-                                                                           "ms_per_frame_wall")}
-    return row
 
 
 def summarise(rows: list[dict]) -> dict:

@@ -9,7 +9,7 @@ in its own process, one at a time (the machine's two cores are the run's):
     python -m rscalib selfcalib SEQ --pixel-size-mm PX --out OUT --quiet
 
 recording the wall time, the peak RSS (/usr/bin/time -f %M), the exit code, f with its bounds and the
-line delay (bench_selfcalib_realistic.run_one), and the machine's load average before each run.
+line delay (_common.run_selfcalib), and the machine's load average before each run.
 
 Usage: .venv/bin/python benchmarks/bench_selfcalib_speed.py [--styles walk-forward,look-around,sideways-dolly]
            [--seed0 1500] [--seeds 1] [--seconds 30] [--cache /tmp/rscalib_selfcalib_speed]
@@ -26,7 +26,8 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_selfcalib_realistic import STYLES, run_one  # noqa: E402
+from _common import SELFCALIB_STYLES as STYLES  # noqa: E402  (benchmarks/_common.py)
+from _common import run_selfcalib as run_one  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 FPS = 30
