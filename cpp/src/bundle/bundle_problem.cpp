@@ -657,7 +657,13 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
   }
   result.rms_px = std::sqrt(sum_sq / std::max(1, 2 * num_used));
 
-  if (options.compute_covariance) covariance();
+  if (options.compute_covariance) {
+    covariance();
+  } else {  // zeros of the documented size
+    result.covariance_model = Eigen::MatrixXd::Zero(num_globals_full, num_globals_full);
+    result.covariance_tracks = result.covariance_two_way = result.covariance_model;
+    result.remaining_step = Eigen::VectorXd::Zero(num_globals_full);
+  }
   return result;
 }
 
