@@ -20,7 +20,9 @@ Every base video is run with its exact camera (clean) and with about three of th
 The encodings are H.264 through imageio-ffmpeg (the phone's; `pip install 'rscalib[bench]'`).
 A fault's *cause* is what the verdict should name first (judge.CAUSES). The bars: trusted-and-wrong
 (|error| > 3 sigma while trusted) <= 1 % of the runs, clean videos not trusted <= 5 %, and the first
-cause named right in >= 80 % of the faulty runs the verdict does not trust. Runs with the advice
+cause named right in >= 80 % of the faulty runs, counted two ways: of the runs the verdict does not trust
+(their first reason), and of every faulty run (a trusted run names a fault that did not bend d in a
+caveat: judge.Diagnosis.named_cause; a clean run should name none). Runs with the advice
 --refine-intrinsics are re-run with it, and whether that helped is counted (advice only where it helps).
 Results: benchmarks/results/bench_linedelay_verdict_<seed0>.json.
 """
@@ -288,7 +290,7 @@ def _record(run: dict, out, truth_s: float) -> dict:
             "std_us": std * 1e6 if math.isfinite(std) else None,
             "z": (d - truth_s) / std if math.isfinite(std) and std > 0 else None,
             "rel_err": (d - truth_s) / truth_s, "first_cause": diagnosis.first_cause, "causes": diagnosis.causes,
-            "reasons": list(verdict.reasons), "caveats": list(verdict.caveats), "evidence": diagnosis.evidence,
+            "named_cause": diagnosis.named_cause, "reasons": list(verdict.reasons), "caveats": list(verdict.caveats), "evidence": diagnosis.evidence,
             "advice": list((out.guidance or {}).get("advice", []))}
 
 
@@ -328,7 +330,8 @@ def rejudge(rows: list[dict]) -> list[dict]:
             continue
         diagnosis = diagnose_evidence(row["evidence"])
         row = dict(row, status=diagnosis.verdict.status, exit=diagnosis.verdict.exit_code,
-                   first_cause=diagnosis.first_cause, causes=diagnosis.causes, reasons=list(diagnosis.verdict.reasons))
+                   first_cause=diagnosis.first_cause, causes=diagnosis.causes, named_cause=diagnosis.named_cause,
+                   reasons=list(diagnosis.verdict.reasons), caveats=list(diagnosis.verdict.caveats))
         out.append(row)
     return out
 
@@ -356,6 +359,9 @@ def summarise(rows: list[dict]) -> dict:
             "flagged": len(flagged),
             "wrong (> 3 sigma)": sum(wrong(r) for r in mine),
             "first causes": sorted({str(r.get("first_cause")) for r in flagged}),
+            # what the verdict names first on every run, trusted ones included (their caveats)
+            "named cause right": sum(r.get("named_cause") == EXPECTED_CAUSE[fault] for r in mine),
+            "named causes": sorted({str(r.get("named_cause")) for r in mine}),
         }
     estimated = [r for r in rows if r["status"] != "input error"]
     faulty = [r for r in rows if r["fault"] != "clean"]
@@ -382,6 +388,12 @@ def summarise(rows: list[dict]) -> dict:
         "faulty_runs": len(faulty),
         "first_cause_right_of_all_faulty_fraction": sum(r.get("first_cause") == EXPECTED_CAUSE[r["fault"]]
                                                         for r in faulty_flagged) / max(1, len(faulty)),
+        # the cause named first on every faulty run: a trusted run names it in a caveat (a fault that did
+        # not bend d beyond its error bar); a clean run should name none
+        "named_cause_right": sum(r.get("named_cause") == EXPECTED_CAUSE[r["fault"]] for r in faulty),
+        "named_cause_right_of_all_faulty_fraction": sum(r.get("named_cause") == EXPECTED_CAUSE[r["fault"]]
+                                                        for r in faulty) / max(1, len(faulty)),
+        "clean_with_a_cause_named": sum(r.get("named_cause") is not None for r in clean),
         "faulty_wrong": sum(wrong(r) for r in faulty),
         "faulty_wrong_flagged": sum(wrong(r) and r["status"] != "trusted" for r in faulty),
         "refine_advised": len(advised), "refine_helped": len(helped),
@@ -395,12 +407,14 @@ def summarise(rows: list[dict]) -> dict:
 
 def markdown(summary: dict) -> str:
     head = ["fault", "runs", "trusted, within 3σ", "trusted, > 3σ off", "not trusted", "not determined",
-            "input error", "first cause right (of flagged)", "first causes named"]
+            "input error", "first cause right (of flagged)", "first causes named", "named cause right (all runs)",
+            "named first (all runs)"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for fault, t in summary["table"].items():
         lines.append(f"| {fault} | {t['runs']} | {t['trusted, within 3 sigma']} | {t['trusted, > 3 sigma off']} | "
                      f"{t['not trusted']} | {t['not determined']} | {t['input error']} | "
-                     f"{t['first cause right']}/{t['flagged']} | {', '.join(t['first causes'])} |")
+                     f"{t['first cause right']}/{t['flagged']} | {', '.join(t['first causes'])} | "
+                     f"{t.get('named cause right', '')}/{t['runs']} | {', '.join(t.get('named causes', []))} |")
     return "\n".join(lines)
 
 

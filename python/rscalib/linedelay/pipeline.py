@@ -254,13 +254,51 @@ def check_camera(camera: CameraModel, options: LineDelayOptions, result: LineDel
         return None
     field = residual_structure(result)["image_field"]
     try:
-        refined_s, cost = refit_with_intrinsics(result, camera, options, max_iterations=CAMERA_CHECK_STEPS)
+        refined_s, cost, refined_params = refit_with_intrinsics(result, camera, options,
+                                                                max_iterations=CAMERA_CHECK_STEPS)
     except InputError as error:
         return {"error": str(error)}
     # the data's sigma: before the halves' widening (with the noise model's inflation, §8)
     data_std = result.line_delay_std_s / max(1.0, float((result.self_check or {}).get("widen") or 1.0))
     return {"image_field": field, "line_delay_s": refined_s, "normalised_cost": cost,
-            "shift_sigma": float((refined_s - result.line_delay_s) / data_std) if data_std > 0 else None}
+            "shift_sigma": float((refined_s - result.line_delay_s) / data_std) if data_std > 0 else None,
+            **camera_change(camera, refined_params)}
+
+
+def camera_change(camera: CameraModel, refined_params) -> dict:
+    """How far the intrinsics the board's video prefers are from the camera file's (the camera check's
+    refit), in the units a user acts on: the focal length's relative change (the larger of fx, fy), the
+    principal point's move in pixels and the largest image displacement of the distortion alone (the
+    file's focal length and centre with the refined distortion, over a grid of the image). A camera file
+    a few per cent off can leave d unmoved and still be wrong for every other use (the verdict's caveat)."""
+    names = list(camera.param_names)
+    old = np.asarray(camera.params, dtype=np.float64)
+    new = np.asarray(refined_params, dtype=np.float64).reshape(-1)
+    if new.shape != old.shape or not np.all(np.isfinite(new)):
+        return {}
+    out = {"param_names": names, "params_file": old.tolist(), "params_refined": new.tolist()}
+    focal = [i for i, n in enumerate(names) if n in ("f", "fx", "fy")]
+    if focal:
+        changes = [(new[i] - old[i]) / old[i] for i in focal]
+        out["focal_change_fraction"] = float(max(changes, key=abs))
+    centre = [names.index(n) for n in ("cx", "cy") if n in names]
+    if len(centre) == 2:
+        out["centre_change_px"] = float(np.hypot(*(new[centre] - old[centre])))
+    distortion = [i for i, n in enumerate(names) if n not in ("f", "fx", "fy", "cx", "cy")]
+    if distortion:
+        mixed = old.copy()
+        mixed[distortion] = new[distortion]
+        try:
+            other = CameraModel(camera.model, mixed, camera.width, camera.height,
+                                np.asarray(camera.pixel_size_mm, dtype=np.float64))
+            u, v = np.meshgrid(np.linspace(0, camera.width - 1, 9), np.linspace(0, camera.height - 1, 7))
+            uv = np.c_[u.ravel(), v.ravel()]
+            moved = other.project(camera.unproject(uv))
+            step = np.linalg.norm(moved - uv, axis=1)
+            out["distortion_change_px"] = float(np.max(step[np.isfinite(step)])) if np.isfinite(step).any() else None
+        except (InputError, ValueError, RuntimeError):
+            out["distortion_change_px"] = None
+    return out
 
 
 def _frame_rate_or_none(result) -> Optional[float]:

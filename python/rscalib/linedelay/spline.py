@@ -477,8 +477,8 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
 
 
 def refit_with_intrinsics(result: LineDelayResult, camera: CameraModel, options: LineDelayOptions, *,
-                          max_iterations: int) -> tuple[float, float]:
-    """d and J/2N after at most `max_iterations` solver steps from `result`'s solution with the intrinsics
+                          max_iterations: int) -> tuple[float, float, np.ndarray]:
+    """d, J/2N and the intrinsics (the camera's layout) after at most `max_iterations` solver steps from `result`'s solution with the intrinsics
     freed under their prior (the camera check, docs/formulation.md §17): the same knots, observations and
     error weights as `result`, so only the intrinsics move d. The first step is the linearised answer to
     "how far would the camera file move d"; a few more follow its curvature. No sigma is computed."""
@@ -498,7 +498,8 @@ def refit_with_intrinsics(result: LineDelayResult, camera: CameraModel, options:
     solver.function_tolerance = _ROUND_FUNCTION_TOLERANCE
     summary = solve_line_delay(used.frame_times_s[used.frame_index], used.uv, used.points_w(), camera,
                                result.trajectory.copy(), result.line_delay_s, solver)
-    return float(summary.line_delay_s), float(summary.measurement_cost / max(1, 2 * summary.num_error_terms))
+    return (float(summary.line_delay_s), float(summary.measurement_cost / max(1, 2 * summary.num_error_terms)),
+            np.asarray(summary.intrinsics, dtype=np.float64).copy())
 
 
 def _set_intrinsics_prior(options: RsSolverOptions, camera: CameraModel,

@@ -310,12 +310,18 @@ def test_the_camera_checks_few_steps_give_the_full_refined_solves_shift(f_scale)
     full = calibrate_line_delay(result.used_observations, camera, replace(options, refine_intrinsics=True),
                                 frame_poses=result.frame_poses, start_trajectory=result.trajectory,
                                 line_delay0_s=result.line_delay_s)
-    refit_s, _ = refit_with_intrinsics(result, camera, options, max_iterations=pipeline.CAMERA_CHECK_STEPS)
+    refit_s, _, _ = refit_with_intrinsics(result, camera, options, max_iterations=pipeline.CAMERA_CHECK_STEPS)
     data_std = result.line_delay_std_s / max(1.0, float(result.self_check.get("widen") or 1.0))
     full_shift = (full.line_delay_s - result.line_delay_s) / data_std
     refit_shift = (refit_s - result.line_delay_s) / data_std
     assert abs(refit_shift - full_shift) <= 0.05 * abs(full_shift) + 0.1
     assert run.diagnosis.evidence["camera_check"]["shift_sigma"] == pytest.approx(refit_shift)
+    # the refit's focal length goes back towards the rendered one: the file's error, said in per cent
+    focal = run.diagnosis.evidence["camera_check"]["focal_change_fraction"]
+    assert focal == pytest.approx(1.0 / f_scale - 1.0, abs=0.005)
+    wrong_file = abs(f_scale - 1.0) >= judge.CAVEAT_FOCAL_FRACTION
+    assert (run.diagnosis.named_cause == judge.CAMERA) == wrong_file
+    assert run.diagnosis.verdict.trusted or run.diagnosis.first_cause == judge.CAMERA
 
 
 @pytest.mark.parametrize("determined", [True, False])
@@ -335,3 +341,73 @@ def test_refine_intrinsics_is_advised_only_when_the_camera_is_the_first_cause(de
     assert judge.CAMERA in later.causes
     assert not any("--refine-intrinsics" in reason for reason in later.verdict.reasons)
     assert any("calibrate the camera again" in reason for reason in later.verdict.reasons)
+
+
+def _check(focal=0.001, centre=0.5, distortion=0.8, shift=0.1) -> dict:
+    return {"camera_check": {"focal_change_fraction": focal, "centre_change_px": centre,
+                             "distortion_change_px": distortion, "shift_sigma": shift}}
+
+
+@pytest.mark.parametrize("change, words", [(dict(focal=-0.028), "focal length 2.8 % shorter"),
+                                           (dict(centre=21.0), "principal point 21 px away"),
+                                           (dict(distortion=17.5), "up to 18 px")])
+def test_a_camera_file_the_board_disagrees_with_is_a_caveat_on_a_trusted_d(change, words):
+    """A camera file a few per cent off that does not bend d (the verdict sets' trusted camera faults):
+    d stays trusted, and the camera is named in a caveat, with what to do about the file."""
+    d = judge.diagnose_evidence(evidence(**_check(**change)))
+    assert d.verdict.trusted and d.first_cause is None and d.verdict.reasons == ()
+    assert d.named_cause == judge.CAMERA
+    assert words in d.verdict.caveats[0] and "rscalib intrinsics" in d.verdict.caveats[0]
+
+
+def test_a_camera_file_within_the_clean_runs_spread_names_nothing():
+    """The largest refit changes of the 20 clean runs of set 4700 (0.67 %, 1.3 px, 2.2 px) name nothing."""
+    d = judge.diagnose_evidence(evidence(**_check(focal=0.0067, centre=1.3, distortion=2.2)))
+    assert d.verdict.trusted and d.named_cause is None and d.verdict.caveats == ()
+
+
+def test_a_low_bitrate_is_named_before_the_camera_on_a_trusted_d():
+    d = judge.diagnose_evidence(evidence(bits_per_pixel=0.04, **_check(focal=0.02)))
+    assert d.verdict.trusted and d.named_cause == judge.COMPRESSION
+    assert [f.cause for f in d.findings] == [judge.COMPRESSION, judge.CAMERA]
+
+
+def test_j2n_below_one_names_no_cause():
+    d = judge.diagnose_evidence(evidence(normalised_cost=0.4))
+    assert d.verdict.trusted and d.verdict.caveats and d.named_cause is None
+
+
+def test_a_not_trusted_verdict_carries_no_harmless_fault_caveats():
+    d = judge.diagnose_evidence(evidence(normalised_cost=2.4, halves_cost=[2.3, 2.5], bits_per_pixel=0.04,
+                                         **_check(focal=0.03)))
+    assert not d.verdict.trusted and d.verdict.caveats == () and d.named_cause == d.first_cause
+
+
+def test_the_camera_change_measures_against_opencv():
+    """pipeline.camera_change: the focal length's relative change, the centre's move and the largest
+    displacement of the distortion alone; the oracle for the distortion is OpenCV's undistortPoints
+    and projectPoints over the same grid."""
+    import cv2
+
+    from rscalib._core import CameraModel
+    from rscalib.linedelay.pipeline import camera_change
+
+    file_params = np.array([500.0, 500.0, 319.5, 239.5, -0.1, 0.05, 0.0, 0.0, 0.0])
+    camera = CameraModel("pinhole-radtan", file_params, 640, 480)
+    refined = file_params.copy()
+    refined[0] *= 0.97
+    refined[1] *= 0.98
+    refined[2] += 6.0
+    refined[3] -= 8.0
+    refined[4:] = 0.0
+    out = camera_change(camera, refined)
+    assert out["focal_change_fraction"] == pytest.approx(-0.03)
+    assert out["centre_change_px"] == pytest.approx(10.0)
+    k = np.array([[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]])
+    u, v = np.meshgrid(np.linspace(0, 639, 9), np.linspace(0, 479, 7))
+    uv = np.c_[u.ravel(), v.ravel()]
+    rays = cv2.undistortPoints(uv.reshape(-1, 1, 2), k, file_params[[4, 5, 6, 7, 8]]).reshape(-1, 2)
+    moved, _ = cv2.projectPoints(np.c_[rays, np.ones(len(rays))], np.zeros(3), np.zeros(3), k, np.zeros(5))
+    expected = np.max(np.linalg.norm(moved.reshape(-1, 2) - uv, axis=1))
+    assert out["distortion_change_px"] == pytest.approx(expected, rel=1e-3)
+    assert camera_change(camera, file_params)["distortion_change_px"] == pytest.approx(0.0, abs=1e-9)
