@@ -20,6 +20,7 @@
 #include "rscalib/bundle/reprojection_cost.hpp"
 #include "rscalib/core/error.hpp"
 #include "rscalib/core/memory_limit.hpp"
+#include "rscalib/core/solver_settings.hpp"
 
 namespace rscalib::bundle {
 
@@ -374,19 +375,10 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
       solver_options.preconditioner_type = ceres::SCHUR_JACOBI;
     } else {
       solver_options.linear_solver_type = ceres::SPARSE_SCHUR;
-      solver_options.sparse_linear_algebra_library_type =
-          ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE)
-              ? ceres::SUITE_SPARSE
-              : ceres::EIGEN_SPARSE;
+      solver_options.sparse_linear_algebra_library_type = SparseLibrary();
     }
     solver_options.linear_solver_ordering = ordering;
-    solver_options.max_num_iterations = options.max_iterations;
-    solver_options.function_tolerance = options.function_tolerance;
-    solver_options.gradient_tolerance = options.gradient_tolerance;
-    solver_options.parameter_tolerance = options.parameter_tolerance;
-    solver_options.num_threads = options.num_threads;
-    solver_options.minimizer_progress_to_stdout = options.verbose;
-    solver_options.logging_type = options.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
+    SetStopAndLogging(options, &solver_options);
     if (stop != nullptr) {
       solver_options.callbacks.push_back(stop);
       solver_options.update_state_every_iteration = true;  // the callback reads the points

@@ -22,6 +22,8 @@
 #include <Eigen/Core>
 #include <ceres/ceres.h>
 
+#include "rscalib/core/solver_settings.hpp"
+
 namespace rscalib::rs::detail {
 
 // ------------------------------------------------------------------------------ options
@@ -65,16 +67,8 @@ SolveSettings MakeSolveSettings(const Options& options, bool wait_for_line_delay
   SolveSettings s;
   s.solver.trust_region_strategy_type = ceres::DOGLEG;
   s.solver.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  s.solver.sparse_linear_algebra_library_type =
-      ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE
-                                                                            : ceres::EIGEN_SPARSE;
-  s.solver.num_threads = std::max(1, options.num_threads);
-  s.solver.max_num_iterations = options.max_iterations;
-  s.solver.function_tolerance = options.function_tolerance;
-  s.solver.gradient_tolerance = options.gradient_tolerance;
-  s.solver.parameter_tolerance = options.parameter_tolerance;
-  s.solver.minimizer_progress_to_stdout = options.verbose;
-  s.solver.logging_type = options.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
+  s.solver.sparse_linear_algebra_library_type = SparseLibrary();
+  SetStopAndLogging(options, &s.solver);
   s.robust_loss = options.robust_loss;
   s.robust_loss_scale = options.robust_loss_scale;
   s.max_outer_iterations = options.max_outer_iterations;
