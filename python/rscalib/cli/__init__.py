@@ -21,6 +21,7 @@ from .common import EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_OK, EXIT_UNDETERMINED  #
 
 EXIT_INTERRUPTED = 130   # Ctrl-C (128 + SIGINT)
 EXIT_TERMINATED = 143    # SIGTERM (128 + SIGTERM)
+EXIT_BROKEN_PIPE = 141   # the reader of stdout went away (128 + SIGPIPE), e.g. `rscalib ... | head`
 
 # One module per subcommand: add_parser(sub) and run(args); each imports its engine only when run.
 COMMAND_MODULES = [batch, demo, flicker, guide, intrinsics, linedelay, selfcalib, simulate]
@@ -128,6 +129,11 @@ def main(argv: list[str] | None = None) -> int:
         except Terminated:
             print("rscalib: terminated", file=sys.stderr)
             return EXIT_TERMINATED
+        except BrokenPipeError:
+            # not bad input: the reader closed the pipe. Stdout goes to /dev/null so that the
+            # interpreter's final flush cannot fail again; nothing is said (as a killed `cat` says nothing).
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return EXIT_BROKEN_PIPE
         except Exception as error:  # noqa: BLE001 - the last line of defence: never a traceback for a user
             if os.environ.get("RSCALIB_DEBUG"):
                 raise

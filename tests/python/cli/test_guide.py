@@ -28,3 +28,19 @@ def test_verdicts_point_at_the_installed_guide():
     from rscalib.cli.common import CAPTURE_GUIDE
 
     assert "rscalib guide capture" in CAPTURE_GUIDE and "repository" not in CAPTURE_GUIDE
+
+
+def test_a_reader_that_goes_away_is_no_error():
+    """`rscalib guide capture | head -1`: the reader closes the pipe before the text is written. That
+    is not bad input (exit 2) but the shell's broken pipe, 128 + SIGPIPE, and nothing is said."""
+    import os
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)   # the reader is gone before the first write
+    try:
+        done = subprocess.run([*CLI, "guide", "capture"], stdout=write_end, stderr=subprocess.PIPE, text=True,
+                              timeout=60)
+    finally:
+        os.close(write_end)
+    assert done.returncode == 141, done.stderr
+    assert done.stderr == ""
