@@ -115,7 +115,8 @@ class CheckerboardTracker:
             # detector's own refinement then runs exactly as after a full detection
             coarse = _wide_subpix(gray, predicted, self.grid_shape, step)
             found = self._refiner.refine_checkerboard(gray, coarse, numbered=True)
-            if found.accepted and self._verified(gray, predicted, found.uv):
+            if found.accepted and not refinement_was_reset(found.uv, coarse) and self._verified(
+                    gray, predicted, found.uv):
                 self.counts["tracked"] += 1
                 self._remember(index, found.uv)
                 return found
@@ -215,6 +216,17 @@ class CheckerboardTracker:
         if np.sqrt(shift_sq.max()) > MAX_SHIFT_STEPS * _min_step(grid):
             return False
         return corners_are_saddles(gray, grid)
+
+
+def refinement_was_reset(refined: np.ndarray, start: np.ndarray) -> bool:
+    """Whether a refined corner is exactly one of the refinement's start points. cornerSubPix puts a
+    corner back on its start when it would leave its window: such a corner was not found, and a
+    grid that did not move can then pass every later check (no shift, a perfect local homography,
+    saddles still alternating; frame 1641 of the 60 s speed render, in a variant that refined from
+    the previous frame's corners). Any other result differs from its start in the last bits."""
+    refined = np.asarray(refined, dtype=np.float64).reshape(-1, 2)
+    start = np.asarray(start, dtype=np.float64).reshape(-1, 2)
+    return bool(np.any(np.all(refined[:, None, :] == start[None, :, :], axis=2)))
 
 
 def _beyond_border(uv: np.ndarray, shape: tuple) -> np.ndarray:

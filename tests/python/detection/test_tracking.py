@@ -173,3 +173,34 @@ def test_decode_thread_passes_errors_and_stops_early():
         if item == 3:
             break
     assert taken == [0, 1, 2, 3] and closed == [True]
+
+
+def test_a_refinement_put_back_on_its_start_is_not_a_track(sequence, monkeypatch):
+    """cornerSubPix puts a corner back on its start when it would leave its window. A tracked grid
+    with such a corner was not found there, whatever the later checks say: the frame goes to full
+    detection (which finds the board), and a refinement that moved every corner is kept."""
+    from rscalib.detection.tracking import refinement_was_reset
+
+    images, _ = sequence
+    detector = Detector(BOARD)
+    tracker = CheckerboardTracker(detector)
+    for k in range(3):
+        assert tracker.detect(images[k], k).accepted
+    refine = tracker._refiner.refine_checkerboard
+
+    def one_corner_reset(gray, coarse, numbered=True):
+        found = refine(gray, coarse, numbered=numbered)
+        uv = found.uv.copy()
+        nearest = int(np.argmin(np.linalg.norm(coarse - uv[7], axis=1)))
+        uv[7] = coarse[nearest]          # what cornerSubPix returns for a corner it lost
+        return replace(found, uv=uv)
+
+    monkeypatch.setattr(tracker._refiner, "refine_checkerboard", one_corner_reset)
+    found = tracker.detect(images[3], 3)
+    assert found.accepted and tracker.counts["track_rejected"] == 1 and tracker.counts["full"] == 2
+    assert not refinement_was_reset(found.uv, tracker.extrapolate(4))
+    monkeypatch.setattr(tracker._refiner, "refine_checkerboard", refine)
+    assert tracker.detect(images[4], 4).accepted and tracker.counts["tracked"] == 3
+    start = np.array([[10.0, 20.0], [30.0, 40.0]])
+    assert refinement_was_reset(np.array([[10.3, 20.1], [30.0, 40.0]]), start)
+    assert not refinement_was_reset(start + 1e-9, start)
