@@ -381,6 +381,36 @@ def _harmless_faults(e: dict) -> list:
     return out
 
 
+def _coverage_and_precision(e: dict) -> list:
+    """Findings 4-7 of docs/formulation.md §17: too few usable frames or rows, an inconclusive
+    self-check, a data sigma above 2 % of d, a solver that did not converge."""
+    out = []
+    if e["frames_used"] < MIN_FRAMES_USED_FRACTION * e["frames_total"]:
+        out.append(Finding(COVERAGE, NOT_TRUSTED, f"only {e['frames_used']} of {e['frames_total']} frames "
+                                "were usable", "keep the whole board in view and sharp"))
+    if e["row_span"] < MIN_ROW_SPAN:
+        out.append(Finding(COVERAGE, NOT_TRUSTED, f"the target covered only {e['row_span'] * 100:.0f} % of "
+                                "the image rows", "move it over the whole frame height"))
+    if e["halves_agree"] is None:
+        out.append(Finding(MOTION, NOT_TRUSTED, "self-check inconclusive: "
+                                + (e["halves_reason"] or "a half could not be solved"),
+                                "record longer, with the motion spread over the video"))
+    d, data_std = e["line_delay_s"], e["data_std_s"]
+    if data_std is not None and d and data_std > MAX_RELATIVE_STD * abs(d):
+        text = f"the uncertainty is {data_std / abs(d) * 100:.1f} % of the estimate"
+        bpp = e["bits_per_pixel"]
+        if bpp is not None and bpp < LOW_BITS_PER_PIXEL:
+            out.append(Finding(COMPRESSION, NOT_TRUSTED, text + f", in a video compressed to {bpp:.2f} "
+                                    "bit/pixel (re-encoded?)", "use the camera's original file, or record at a "
+                                    "higher quality setting"))
+        else:
+            out.append(Finding(MOTION, NOT_TRUSTED, text, "record longer or with faster motion"))
+    if not e["converged"]:
+        out.append(Finding(SOLVER, NOT_TRUSTED, "the solver did not report convergence",
+                                "try --robust huber"))
+    return out
+
+
 def diagnose_evidence(e: dict) -> Diagnosis:
     """The verdict and its findings from the evidence of line_delay_evidence (the rules: module doc)."""
     quantity = dict(quantity="line_delay_s", unit="s/row")
@@ -430,29 +460,8 @@ def diagnose_evidence(e: dict) -> Diagnosis:
         findings.append(_camera_finding(e, f"refining the camera's intrinsics with the line delay moves d by "
                                            f"{shift:+.1f} sigma (to {_us(check['line_delay_s'])} us/row): the camera "
                                            "file does not describe this camera well enough for this video"))
-    if e["frames_used"] < MIN_FRAMES_USED_FRACTION * e["frames_total"]:
-        findings.append(Finding(COVERAGE, NOT_TRUSTED, f"only {e['frames_used']} of {e['frames_total']} frames "
-                                "were usable", "keep the whole board in view and sharp"))
-    if e["row_span"] < MIN_ROW_SPAN:
-        findings.append(Finding(COVERAGE, NOT_TRUSTED, f"the target covered only {e['row_span'] * 100:.0f} % of "
-                                "the image rows", "move it over the whole frame height"))
-    if e["halves_agree"] is None:
-        findings.append(Finding(MOTION, NOT_TRUSTED, "self-check inconclusive: "
-                                + (e["halves_reason"] or "a half could not be solved"),
-                                "record longer, with the motion spread over the video"))
-    d, data_std = e["line_delay_s"], e["data_std_s"]
-    if data_std is not None and d and data_std > MAX_RELATIVE_STD * abs(d):
-        text = f"the uncertainty is {data_std / abs(d) * 100:.1f} % of the estimate"
-        bpp = e["bits_per_pixel"]
-        if bpp is not None and bpp < LOW_BITS_PER_PIXEL:
-            findings.append(Finding(COMPRESSION, NOT_TRUSTED, text + f", in a video compressed to {bpp:.2f} "
-                                    "bit/pixel (re-encoded?)", "use the camera's original file, or record at a "
-                                    "higher quality setting"))
-        else:
-            findings.append(Finding(MOTION, NOT_TRUSTED, text, "record longer or with faster motion"))
-    if not e["converged"]:
-        findings.append(Finding(SOLVER, NOT_TRUSTED, "the solver did not report convergence",
-                                "try --robust huber"))
+    findings.extend(_coverage_and_precision(e))
+    d = e["line_delay_s"]
     field, shear = _structure(e)
     if findings and field >= FIELD_CHI and field >= shear and findings[0].cause not in (TARGET_SIZE, CAMERA):
         # a strong fixed pattern over the image: whatever else failed, the camera file is the first suspect
