@@ -634,6 +634,37 @@ def _self_check_html(check: Optional[dict]) -> str:
             f"own.</p>{list_html(_half(h) for h in check.get('halves', []))}<p>{escape(said)}</p>")
 
 
+def _sentence(text: str) -> str:
+    return text[:1].upper() + text[1:] + "." if text else ""
+
+
+def camera_check_html(summary: dict) -> str:
+    """The camera check (docs/formulation.md §17): the camera file's intrinsics next to those the
+    board's video prefers when they are freed for a few solver steps, and how far d moved."""
+    check = ((summary.get("diagnosis") or {}).get("evidence") or {}).get("camera_check") or {}
+    names, given, refit = check.get("param_names"), check.get("params_file"), check.get("params_refined")
+    if not (names and given and refit):
+        return ""
+    rows = "".join(f"<tr><td>{html.escape(n)}</td><td>{a:.6g}</td><td>{b:.6g}</td></tr>"
+                   for n, a, b in zip(names, given, refit))
+    parts = []
+    if check.get("focal_change_fraction") is not None:
+        parts.append(f"focal length {check['focal_change_fraction'] * 100:+.2f} %")
+    if check.get("centre_change_px") is not None:
+        parts.append(f"principal point moved {check['centre_change_px']:.1f} px")
+    if check.get("distortion_change_px") is not None:
+        parts.append(f"the distortion alone moves the image by up to {check['distortion_change_px']:.1f} px")
+    shift = check.get("shift_sigma")
+    moved = "" if shift is None else (f" Freeing them moved the line delay by {shift:+.2f} of its σ: 2 or more means "
+                                      "the camera file matters for this line delay.")
+    return ("<h2>Camera check: does the video agree with the camera file?</h2><p>The camera's intrinsics are freed for a "
+            "few solver steps from the solution (with the camera file as a prior).</p><table><tr><th>parameter</th>"
+            "<th>camera file</th><th>the video prefers</th></tr>" + rows + "</table>"
+            f"<p>{escape(_sentence('; '.join(parts)))}{escape(moved)} A focal length 1.5 % "
+            "off, a principal point 8 px off or 10 px of distortion is said in the notes on the verdict even when the "
+            "line delay does not depend on it: the camera file would then be wrong for other uses.</p>")
+
+
 def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict,
                 provenance: Optional[dict] = None) -> None:
     warnings = summary["warnings"]
@@ -647,7 +678,7 @@ def _write_html(path: Path, title: str, summary: dict, v: Verdict, plots: dict,
     caveats = list_html(v.caveats)
     sections = [f"<h2>Result</h2>{table_html(_table_rows(summary))}",
                 f"<p>Notes on the verdict:</p>{caveats}" if caveats else "",
-                _self_check_html(summary.get("self_check")), intrinsics_html(summary),
+                _self_check_html(summary.get("self_check")), camera_check_html(summary), intrinsics_html(summary),
                 guidance_html, f"<h2>Warnings</h2>{list_html(warnings)}" if warnings else "",
                 f"<h2>Plots</h2>{main}" if main else "",
                 f"<p>About the exports:</p>{list_html(notes)}" if notes else "",

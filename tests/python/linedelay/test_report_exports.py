@@ -113,3 +113,16 @@ def test_intrinsics_writes_the_camera_for_every_tool_and_a_gyroflow_profile(vide
     assert profile["frame_readout_time"] is None and profile["num_images"] == result["views_used"]
     assert profile["camera_brand"] == "Acme" and profile["lens_model"] == "Wide"
     assert result["provenance"]["input_files"]["target"]["sha256"]
+
+
+def test_the_report_shows_the_camera_check_next_to_the_camera_file(linedelay_run):
+    """report.html: the camera file's intrinsics next to those the video prefers (the camera check of
+    result.json's diagnosis), and how far d moved when they were freed."""
+    result = json.loads((linedelay_run / "result.json").read_text())
+    check = result["diagnosis"]["evidence"]["camera_check"]
+    page = (linedelay_run / "report.html").read_text()
+    assert "Camera check: does the video agree with the camera file?" in page
+    for name, given, refit in zip(check["param_names"], check["params_file"], check["params_refined"]):
+        assert f"<tr><td>{name}</td><td>{given:.6g}</td><td>{refit:.6g}</td></tr>" in page
+    assert f"moved the line delay by {check['shift_sigma']:+.2f} of its σ" in page
+    assert f"focal length {check['focal_change_fraction'] * 100:+.2f} %" in page.lower()
