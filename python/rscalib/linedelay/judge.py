@@ -387,27 +387,27 @@ def _coverage_and_precision(e: dict) -> list:
     out = []
     if e["frames_used"] < MIN_FRAMES_USED_FRACTION * e["frames_total"]:
         out.append(Finding(COVERAGE, NOT_TRUSTED, f"only {e['frames_used']} of {e['frames_total']} frames "
-                                "were usable", "keep the whole board in view and sharp"))
+                           "were usable", "keep the whole board in view and sharp"))
     if e["row_span"] < MIN_ROW_SPAN:
         out.append(Finding(COVERAGE, NOT_TRUSTED, f"the target covered only {e['row_span'] * 100:.0f} % of "
-                                "the image rows", "move it over the whole frame height"))
+                           "the image rows", "move it over the whole frame height"))
     if e["halves_agree"] is None:
         out.append(Finding(MOTION, NOT_TRUSTED, "self-check inconclusive: "
-                                + (e["halves_reason"] or "a half could not be solved"),
-                                "record longer, with the motion spread over the video"))
+                           + (e["halves_reason"] or "a half could not be solved"),
+                           "record longer, with the motion spread over the video"))
     d, data_std = e["line_delay_s"], e["data_std_s"]
     if data_std is not None and d and data_std > MAX_RELATIVE_STD * abs(d):
         text = f"the uncertainty is {data_std / abs(d) * 100:.1f} % of the estimate"
         bpp = e["bits_per_pixel"]
         if bpp is not None and bpp < LOW_BITS_PER_PIXEL:
             out.append(Finding(COMPRESSION, NOT_TRUSTED, text + f", in a video compressed to {bpp:.2f} "
-                                    "bit/pixel (re-encoded?)", "use the camera's original file, or record at a "
-                                    "higher quality setting"))
+                               "bit/pixel (re-encoded?)", "use the camera's original file, or record at a "
+                               "higher quality setting"))
         else:
             out.append(Finding(MOTION, NOT_TRUSTED, text, "record longer or with faster motion"))
     if not e["converged"]:
         out.append(Finding(SOLVER, NOT_TRUSTED, "the solver did not report convergence",
-                                "try --robust huber"))
+                           "try --robust huber"))
     return out
 
 
@@ -468,11 +468,6 @@ def diagnose_evidence(e: dict) -> Diagnosis:
         findings.insert(0, _camera_finding(e, f"the residuals form a fixed pattern over the image (chi-square "
                                               f"{field:.0f} per cell against about 1 for noise): the camera file "
                                               "does not describe this camera"))
-    caveats = _harmless_faults(e) if not findings else []
-    if cost is not None and cost < 1.0 / MAX_COST and not findings:
-        caveats.append(Finding(NOISE_MODEL, "caveat", f"J/2N = {cost:.2f} is below 1: the noise model overestimates "
-                                "the detection noise, so sigma_d is on the safe side"))
-    findings.extend(caveats)
     if d is not None and e["std_s"] and d < -NEGATIVE_SIGMA * e["std_s"]:
         # the rows were turned to top-to-bottom by the readout given (or assumed): a shutter reads
         # forwards, so a clearly negative d says the data contradict that direction (issue 33)
@@ -480,6 +475,11 @@ def diagnose_evidence(e: dict) -> Diagnosis:
                                    f"{-d / e['std_s']:.0f} sigma below 0): the rows are read in the other direction "
                                    "than the one given or assumed", "give the opposite --readout (bottom-to-top "
                                    "for top-to-bottom, right-to-left for left-to-right, or the reverse)"))
+    if not findings:   # notes on a trusted d only: a verdict that is not trusted names its causes
+        findings.extend(_harmless_faults(e))
+        if cost is not None and cost < 1.0 / MAX_COST:
+            findings.append(Finding(NOISE_MODEL, "caveat", f"J/2N = {cost:.2f} is below 1: the noise model "
+                                    "overestimates the detection noise, so sigma_d is on the safe side"))
     _refine_advice_only_first(findings)
     trusted = not any(f.weight != "caveat" for f in findings)
     std = e["std_s"]

@@ -411,3 +411,12 @@ def test_the_camera_change_measures_against_opencv():
     expected = np.max(np.linalg.norm(moved.reshape(-1, 2) - uv, axis=1))
     assert out["distortion_change_px"] == pytest.approx(expected, rel=1e-3)
     assert camera_change(camera, file_params)["distortion_change_px"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_negative_line_delay_carries_no_notes_of_a_trusted_d():
+    """The readout direction contradicted (d clearly below 0) is not trusted: the notes that speak of
+    a trusted d ("d does not depend on it here", "sigma_d is on the safe side") are not said."""
+    d = judge.diagnose_evidence(evidence(line_delay_s=-30e-6, normalised_cost=0.4, bits_per_pixel=0.04,
+                                         **_check(focal=0.03)))
+    assert not d.verdict.trusted and d.first_cause == judge.READOUT
+    assert d.verdict.caveats == () and d.named_cause == judge.READOUT
