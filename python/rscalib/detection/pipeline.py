@@ -51,8 +51,9 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
     the usual `if __name__ == "__main__":` guard.
     options.cache: reuse / store the result under options.cache_dir (default_cache_dir()), keyed by
     the hash of the source's bytes, the target definition, the detector's settings and DETECTOR_VERSION.
-    alongside: called once in this process before the first frame is detected, while the workers start
-    (their start-up, ~0.3 s of imports each, runs on the other cores meanwhile); an exception it raises
+    alongside: called once in this process while the workers start (their start-up, ~0.3 s of imports
+    each, runs on the other cores meanwhile): before the first frame is detected, or, when the workers
+    decode their own segments, once the first segments are handed to them; an exception it raises
     stops the workers and is raised here (e.g. the line-delay job's check of the target file)."""
     checks.source(source, "source")
     checks.optional_callable(alongside, "alongside")
@@ -218,10 +219,12 @@ class _Collected:
 
 
 def _detect_segments(frames: FrameSource, plan: list, pool, run_frames: int, workers: int,
-                     bar) -> Optional[_Collected]:
+                     bar, alongside: Optional[Callable[[], None]] = None) -> Optional[_Collected]:
     """Detection by workers that decode their own segments (plan). None when a segment cannot be
     verified to start where it claims, or the container has no frame times (the caller then
-    decodes here): the result is then exactly that of one sequential pass."""
+    decodes here): the result is then exactly that of one sequential pass. alongside runs here once
+    the first segments are submitted: the workers start on them at once instead of after it
+    (0.3 s of the 60 s speed video, docs/benchmarks.md)."""
     collected = _Collected()
     pending: deque = deque()
     tasks = iter(plan)
@@ -235,6 +238,9 @@ def _detect_segments(frames: FrameSource, plan: list, pool, run_frames: int, wor
             with _sigint_blocked():
                 pending.append(pool.submit(_worker_detect_segment, str(frames.paths[0]), frames.fps_nominal,
                                            task[0], task[1], run_frames))
+        if alongside is not None:
+            alongside()
+            alongside = None
         if not pending:
             break
         segment = pending.popleft().result()
@@ -307,14 +313,15 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
     cv_threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
-        if alongside is not None:
+        if alongside is not None and not plan:
             if pool is not None:  # the pool starts a process per task while none is idle
                 with _sigint_blocked():
                     for _ in range(workers):
                         pool.submit(_worker_ready)
             alongside()
         with Progress(progress, estimate, f"detecting {target.target_type}") as bar:
-            collected = _detect_segments(frames, plan, pool, run_frames, workers, bar) if plan else None
+            collected = _detect_segments(frames, plan, pool, run_frames, workers, bar,
+                                         alongside) if plan else None
             if collected is None:
                 collected = _decode_here(frames, pool, detector, run_frames, workers, bar)
     except BaseException:

@@ -146,7 +146,9 @@ class VideoSegment:
         self.no_container_times = False
 
     def frames(self, gray: bool = True) -> Iterator[Frame]:
-        capture = _open_capture(self.path)
+        # one decoder thread: the workers decoding their segments already keep every core busy, and
+        # FFmpeg's frame threads on top cost 15-20 % more CPU for the same frames
+        capture = _open_capture(self.path, decoder_threads=1)
         clock = _ContainerClock(self.fps)
         try:
             if self.start > 0 and not capture.set(cv2.CAP_PROP_POS_FRAMES, self.start):
@@ -202,14 +204,16 @@ class _ContainerClock:
         return time_s
 
 
-def _open_capture(path) -> cv2.VideoCapture:
+def _open_capture(path, decoder_threads: Optional[int] = None) -> cv2.VideoCapture:
     """VideoCapture with FFmpeg, without console noise: problems become our InputError; FFmpeg's
-    own messages stay off unless OPENCV_FFMPEG_LOGLEVEL is set (read when FFmpeg starts)."""
+    own messages stay off unless OPENCV_FFMPEG_LOGLEVEL is set (read when FFmpeg starts).
+    decoder_threads: FFmpeg's decoding threads (None: its default, one per core)."""
     os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET
     level = cv2.utils.logging.getLogLevel()
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # "can't capture by name" warnings
     try:
-        capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+        params = [] if decoder_threads is None else [cv2.CAP_PROP_N_THREADS, int(decoder_threads)]
+        capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG, params)
     finally:
         cv2.utils.logging.setLogLevel(level)
     if not capture.isOpened():

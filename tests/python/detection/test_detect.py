@@ -11,7 +11,7 @@ import pytest
 
 from rscalib.detection.detectors import Detector, _outer_ring_alternates, detect_image
 from rscalib.detection.options import DetectOptions
-from rscalib.detection.pipeline import detect_video
+from rscalib.detection.pipeline import detect_video, segment_plan
 from rscalib.detection.quality import local_homography_residual
 from rscalib.io.targets import target_from_dict
 
@@ -308,11 +308,14 @@ def test_video(tmp_path_factory):
 
 def test_alongside_runs_once_while_the_workers_start_and_its_error_stops_the_detection(test_video, tmp_path):
     """`alongside` (the line-delay job's early check of the target file) runs once, in this process,
-    before any frame is detected, with workers, in one process and on a cached result; an exception
-    it raises stops the detection: nothing is returned or cached."""
+    with workers (frames decoded here, or segments the workers decode themselves: runs of 2 frames),
+    in one process and on a cached result; an exception it raises stops the detection: nothing is
+    returned or cached."""
     path, kinds = test_video
     cache = tmp_path / "cache"
-    for options in (DetectOptions(workers=2, cache_dir=cache), DetectOptions(workers=1, cache=False),
+    segments = DetectOptions(workers=2, cache=False, full_detection_every=2)
+    assert segment_plan(len(kinds), 2, 2) is not None
+    for options in (DetectOptions(workers=2, cache_dir=cache), DetectOptions(workers=1, cache=False), segments,
                     DetectOptions(workers=2, cache_dir=cache)):   # the last: from the cache
         calls: list = []
         result = detect_video(path, CHECKERBOARD, options, progress=False, alongside=lambda calls=calls: calls.append(1))
@@ -326,8 +329,9 @@ def test_alongside_runs_once_while_the_workers_start_and_its_error_stops_the_det
         raise Stop("the target file does not match")
 
     other = tmp_path / "other_cache"
-    with pytest.raises(Stop):
-        detect_video(path, CHECKERBOARD, DetectOptions(workers=2, cache_dir=other), progress=False, alongside=stop)
+    for options in (DetectOptions(workers=2, cache_dir=other), replace(segments, cache=True, cache_dir=other)):
+        with pytest.raises(Stop):
+            detect_video(path, CHECKERBOARD, options, progress=False, alongside=stop)
     assert not list(other.glob("*.npz"))
 
 

@@ -134,8 +134,8 @@ def test_a_seek_that_lands_elsewhere_is_not_used(mpeg4, monkeypatch):
     class LandsOneLater:
         """A capture whose frame seek lands on the next frame (as some files do)."""
 
-        def __init__(self, path):
-            self.capture = open_capture(path)
+        def __init__(self, path, decoder_threads=None):
+            self.capture = open_capture(path, decoder_threads=decoder_threads)
 
         def set(self, prop, value):
             return self.capture.set(prop, value + 1 if prop == cv2.CAP_PROP_POS_FRAMES else value)
