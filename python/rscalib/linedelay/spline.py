@@ -287,30 +287,95 @@ def localize(observations: Observations, camera: CameraModel, line_delay_s: floa
 
 def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_poses=None, start_trajectory=None,
          progress=None, threads=SOLVER_THREADS, start_fixed_pattern_px=None) -> LineDelayResult:
-    rows, pixel_sigma, robust_loss, max_rounds = options.rows, options.pixel_sigma_px, options.robust_loss, \
-        options.max_rounds
-    check_rows_read(rows, observations.image_size[1])
-    min_segment_s, num_segments = options.min_segment_s, options.uniform_knots
-    adaptive_knots = num_segments is None
-    standardise_errors, use_motion_prior = options.standardise_errors, options.motion_prior
-    refine_intrinsics = options.refine_intrinsics
-    intrinsics_prior = options.intrinsics_prior if refine_intrinsics else None
+    check_rows_read(options.rows, observations.image_size[1])
+    intrinsics_prior = options.intrinsics_prior if options.refine_intrinsics else None
     if intrinsics_prior is not None and not isinstance(intrinsics_prior, IntrinsicsPrior):
         intrinsics_prior = load_intrinsics_prior(intrinsics_prior, camera)
     started = time.perf_counter()
-    rows, fps, nominal_delay_s, d = initial_values(observations, camera, rows, line_delay_s)
     warnings: list[str] = []
-    initial_d = d
+    start = _start(observations, camera, options, line_delay_s, frame_poses, start_trajectory, warnings)
+    adaptive_knots = options.uniform_knots is None
+    rounds = _Rounds(start, camera, options, estimate=estimate, threads=threads, progress=progress)
+    prior = _set_intrinsics_prior(rounds.solver, camera, intrinsics_prior) if options.refine_intrinsics else None
+    # knots adapted already: chance-level splits end the adaptation from the first round on
+    adapted_start = start_trajectory is not None and adaptive_knots
+    final, adapted = rounds.adapt(adapted_start, start_fixed_pattern_px)
+    if adaptive_knots and not adapted:
+        warnings.append(f"knot adaptation stopped at the round cap ({options.max_rounds}) with segments still "
+                        "above their expected cost")
+    if not (final and adapted):
+        rounds.polish()
+    summary, structure, history, d = rounds.summary, rounds.structure, rounds.history, rounds.d
+    solver_std = summary.line_delay_std_s if estimate else 0.0
+    # correlated errors carry less information than their number says (AR(1) effective sample size)
+    std = solver_std * structure.inflation if estimate else 0.0
+    history[-1].line_delay_s = d
+    history[-1].line_delay_std_s = std
+
+    cost, sigma, determined = assess_noise_and_determinacy(summary, start.sigma, start.sigma_source,
+                                                           start.nominal_delay_s, warnings, estimate=estimate,
+                                                           std_s=std)
+    noise_summary = {"model": "per frame" if rounds.per_frame else "one sigma for the video",
+                     "white_sigma_px": {"median": float(np.median(rounds.white)),
+                                        "p10": float(np.percentile(rounds.white, 10)),
+                                        "p90": float(np.percentile(rounds.white, 90))},
+                     "fixed_pattern_px": structure.fixed_pattern_px,
+                     "frame_to_frame_correlation": structure.correlation,
+                     "sigma_d_inflation": structure.inflation}
+    _fit_warnings(warnings, summary, structure, history[-1], cost, sigma, options, start.min_segment_s,
+                  estimate=estimate, adaptive_knots=adaptive_knots)
+    solve_warnings(summary, warnings)
+    intrinsics = None
+    if options.refine_intrinsics:
+        intrinsics = _intrinsics_summary(summary, camera, rounds.camera, prior,
+                                         structure.inflation if estimate else 1.0, warnings)
+
+    trajectory, used = rounds.trajectory, start.used
+    return LineDelayResult(
+        line_delay_s=d, line_delay_std_s=std, readout_time_s=d * start.rows, rows=start.rows,
+        trajectory=trajectory, knots=np.asarray(trajectory.breakpoints), rms_px=summary.rms_px,
+        normalised_cost=cost, pixel_sigma=sigma, pixel_sigma_source=start.sigma_source,
+        converged=bool(summary.converged), determined=determined, warnings=warnings, history=history,
+        frames_total=observations.num_frames, frames_used=used.num_frames, observations=summary.num_error_terms,
+        initial_line_delay_s=start.d, solve_time_s=time.perf_counter() - started,
+        segment_cost=np.asarray(summary.segment_cost), segment_count=np.asarray(summary.segment_count),
+        observation_time_s=np.asarray(summary.observation_time_s), residual_px=np.asarray(summary.residual_px),
+        image_velocity_px_s=np.asarray(summary.image_velocity_px_s),
+        standardised_sq=np.asarray(summary.standardised_sq), frame_poses=start.used_poses, used_observations=used,
+        observation_sigma_px=rounds.obs_sigma, noise=noise_summary, solver_line_delay_std_s=solver_std,
+        camera=rounds.camera if options.refine_intrinsics else None, intrinsics=intrinsics)
+
+
+@dataclass
+class _Start:
+    """What a solve starts from: the rows, frame rate, nominal and starting d, the shortest segment,
+    the frames with a PnP pose, the pixel sigma and the first round's trajectory."""
+
+    rows: int
+    fps: float
+    nominal_delay_s: float
+    d: float
+    min_segment_s: float
+    used: Observations
+    used_poses: FramePoses
+    sigma: float
+    sigma_source: str
+    trajectory: BSpline
+
+
+def _start(observations: Observations, camera: CameraModel, options: LineDelayOptions,
+           line_delay_s: Optional[float], frame_poses: Optional[FramePoses], start_trajectory: Optional[BSpline],
+           warnings: list) -> _Start:
+    rows, fps, nominal_delay_s, d = initial_values(observations, camera, options.rows, line_delay_s)
+    min_segment_s, num_segments = options.min_segment_s, options.uniform_knots
     if min_segment_s is None:
         # Halving stops below 2 * min_segment_s, so segments can reach ~1 frame at 30 fps. A 2-frame
         # floor could not follow hand shake (0.5-8 Hz): J/2N ~ 75, d several % off. The floor is about
         # the motion's bandwidth, not the frame rate: at most 1/60 s, also for slow (e.g. 7 fps) cameras.
         min_segment_s = min(0.5 / fps, 1.0 / 60.0)
-
-    frames_total = observations.num_frames
     check_solve_memory(len(observations.uv))
     used, used_poses = seed_poses(observations, camera, warnings, min_frames=4, poses=frame_poses)
-    sigma, sigma_source = choose_pixel_sigma(used, pixel_sigma)
+    sigma, sigma_source = choose_pixel_sigma(used, options.pixel_sigma_px)
 
     t_begin = float(used.frame_times_s[0])
     t_end = float(used.frame_times_s[-1] + 1.0 / fps)  # the last frame's readout
@@ -319,161 +384,147 @@ def _run(observations, camera, options, *, estimate, line_delay_s=None, frame_po
     initial_segments_per_s = max(fps / 4.0, 7.5)
     check_segment_count(num_segments, used.num_frames)
     segments = int(num_segments) if num_segments else max(1, int(math.ceil(duration * initial_segments_per_s)))
-    if start_trajectory is not None and adaptive_knots and not num_segments:
+    if start_trajectory is not None and num_segments is None:
         trajectory = restricted_trajectory(start_trajectory, t_begin, t_end, min_segment_s)
     else:
         trajectory = initial_trajectory(used, used_poses, d, segments, t_begin, t_end)
+    return _Start(rows, fps, nominal_delay_s, d, min_segment_s, used, used_poses, sigma, sigma_source, trajectory)
 
-    solver = _solver_options(sigma, estimate_line_delay=estimate, standardise_errors=standardise_errors,
-                             use_motion_prior=use_motion_prior, robust_loss=robust_loss, compute_covariance=False,
-                             threads=threads)
-    # The noise model (docs/formulation.md §8): white noise per frame from the grid, plus what the
-    # residuals show after each round (a fixed pattern per corner, frame-to-frame correlation).
-    per_frame = sigma_source == "grid third differences"
-    weights_per_observation = per_frame
-    white = (noise.frame_pixel_sigma(used, sigma)[used.frame_index] if weights_per_observation
-             else np.full(used.num_observations, sigma))
-    structure = noise.ResidualStructure(0.0, 0.0, 1.0, 0)
-    obs_sigma = white
 
-    def use_sigma(values: np.ndarray) -> None:
-        if weights_per_observation:
-            solver.observation_sigma = values
+class _Rounds:
+    """The knot adaptation (docs/formulation.md §7) and the noise model between its solves (§8):
+    white noise per frame from the grid, plus what the residuals show after each round (a fixed
+    pattern per corner, frame-to-frame correlation). The trajectory, d, the camera (refined with
+    --refine-intrinsics), the last solve's summary and the rounds' history are its state."""
+
+    def __init__(self, start: _Start, camera: CameraModel, options: LineDelayOptions, *, estimate: bool,
+                 threads: int, progress: Optional[Callable[[RoundRecord], None]]):
+        self.options, self.estimate, self.progress = options, estimate, progress
+        self.used, self.min_segment_s = start.used, start.min_segment_s
+        self.adaptive_knots = options.uniform_knots is None
+        self.trajectory, self.d, self.camera = start.trajectory, start.d, camera
+        self.solver = _solver_options(start.sigma, estimate_line_delay=estimate,
+                                      standardise_errors=options.standardise_errors,
+                                      use_motion_prior=options.motion_prior, robust_loss=options.robust_loss,
+                                      compute_covariance=False, threads=threads)
+        self.per_frame = start.sigma_source == "grid third differences"
+        used = start.used
+        self.white = (noise.frame_pixel_sigma(used, start.sigma)[used.frame_index] if self.per_frame
+                      else np.full(used.num_observations, start.sigma))
+        self.structure = noise.ResidualStructure(0.0, 0.0, 1.0, 0)
+        self.obs_sigma = self.white
+        if self.per_frame:
+            self.use_sigma(self.obs_sigma)
+        self.args = (used.frame_times_s[used.frame_index], used.uv, used.points_w(), camera)
+        self.history: list[RoundRecord] = []
+        self.summary = None
+
+    def use_sigma(self, values: np.ndarray) -> None:
+        """The error weights of the next solve: per observation, or one sigma for the video."""
+        if self.per_frame:
+            self.solver.observation_sigma = values
         else:
-            solver.pixel_sigma = float(values[0])
+            self.solver.pixel_sigma = float(values[0])
 
-    if per_frame:
-        use_sigma(obs_sigma)
-    start_camera = camera
-    if refine_intrinsics:
-        prior = _set_intrinsics_prior(solver, camera, intrinsics_prior)
-    args = (used.frame_times_s[used.frame_index], used.uv, used.points_w(), camera)
-    history: list[RoundRecord] = []
-    adapted = not adaptive_knots
-    summary = None
-    # Rounds are solved loosely, except the final one: tight, then sigma_d alone. A round is final when
-    # the round before split few segments (those rarely split again; if the final round still splits
-    # more than chance would, another round follows). Otherwise a polish on the final knots ends the
-    # solve. The first round is final only from knots already adapted and errors already weighted by the
-    # noise model's fixed-pattern part (the whole video from its halves): otherwise its residuals give
-    # that part, which weighs the errors of the rounds after it (and of sigma_d).
-    # knots adapted already: chance-level splits end the adaptation from the first round on
-    adapted_start = start_trajectory is not None and adaptive_knots and not num_segments
-    final = False
-    if adapted_start and per_frame and start_fixed_pattern_px is not None and np.isfinite(start_fixed_pattern_px):
-        obs_sigma = np.sqrt(white ** 2 + float(start_fixed_pattern_px) ** 2)
-        use_sigma(obs_sigma)
-        final = True
-    for round_index in range(max(1, max_rounds)):
-        last_chance = round_index == max_rounds - 1
-        # a final round usually ends the adaptation: sigma_d comes with it (wasted if it splits again)
-        _set_tolerance(solver, final=final, covariance=final and estimate)
-        summary = solve_line_delay(*args, trajectory, d, solver)
-        d = summary.line_delay_s
-        if refine_intrinsics:  # the next round starts from the refined camera
-            camera = _with_params(camera, summary.intrinsics)
-            args = args[:3] + (camera,)
-        cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
-        segment_cost = summary.segment_cost
-        if per_frame:
-            # what the residuals say beyond the white part; the split test sees errors weighted by it
-            structure = noise.residual_structure(used, np.asarray(summary.residual_px), white)
-            new_sigma = np.sqrt(white ** 2 + structure.fixed_pattern_px ** 2)
-            sq = np.asarray(summary.standardised_sq) * (obs_sigma / new_sigma) ** 2
-            segment_cost = _segment_sums(trajectory, np.asarray(summary.observation_time_s), sq,
-                                         len(summary.segment_cost))
-        new_knots, at_cap = _split_segments(trajectory, segment_cost, summary.segment_count,
-                                            min_segment_s, SPLIT_MARGIN_SIGMAS,
-                                            structure.correlation) if adaptive_knots else ([], 0)
-        # splits no more than chance would make on a well-modelled trajectory end the adaptation (not in
-        # the first round from PnP, whose knots are too few on purpose)
-        if (round_index > 0 or adapted_start) and cost <= CHANCE_STOP_MAX_COST and \
-                len(new_knots) <= CHANCE_SPLIT_FRACTION * trajectory.num_segments:
-            new_knots = []
-        if round_index == 0 and final and per_frame and \
-                np.max(np.abs(new_sigma / obs_sigma - 1.0)) > START_WEIGHTS_TOLERANCE:
-            final = False   # the start's weights (the halves' fixed pattern) are not this video's: re-weigh, polish
-        if per_frame and not (final and not new_knots):  # the next solve weighs the errors by it
-            obs_sigma = new_sigma
-            use_sigma(obs_sigma)
-        record = RoundRecord(round_index, trajectory.num_segments, d, float("nan"), cost, summary.rms_px,
-                             0 if last_chance else len(new_knots), at_cap, summary.iterations,
-                             summary.solve_time_s)
-        history.append(record)
-        if progress:
-            progress(record)
-        if not new_knots:
-            adapted = True
-            break
-        if last_chance:
-            break
-        for t in new_knots:
-            trajectory.insert_knot(t)
-        final = len(new_knots) <= _FINAL_AFTER_SPLITS * trajectory.num_segments
-    if adaptive_knots and not adapted:
-        warnings.append(f"knot adaptation stopped at the round cap ({max_rounds}) with segments still "
-                        "above their expected cost")
+    def _solve(self) -> None:
+        self.summary = solve_line_delay(*self.args, self.trajectory, self.d, self.solver)
+        self.d = self.summary.line_delay_s
+        if self.options.refine_intrinsics:  # the next round starts from the refined camera
+            self.camera = _with_params(self.camera, self.summary.intrinsics)
+            self.args = self.args[:3] + (self.camera,)
 
-    if not (final and adapted):
-        # Final polish at tight tolerance on the final knots, with the covariance of d.
-        _set_tolerance(solver, final=True, covariance=estimate)
-        summary = solve_line_delay(*args, trajectory, d, solver)
-        d = summary.line_delay_s
-        if refine_intrinsics:
-            camera = _with_params(camera, summary.intrinsics)
-        if per_frame:
-            structure = noise.residual_structure(used, np.asarray(summary.residual_px), white)
-        history[-1].iterations += summary.iterations
-        history[-1].solve_time_s += summary.solve_time_s
-    intrinsics = None
-    solver_std = summary.line_delay_std_s if estimate else 0.0
-    # correlated errors carry less information than their number says (AR(1) effective sample size)
-    std = solver_std * structure.inflation if estimate else 0.0
-    history[-1].line_delay_s = d
-    history[-1].line_delay_std_s = std
+    def adapt(self, adapted_start: bool, start_fixed_pattern_px: Optional[float]) -> tuple[bool, bool]:
+        """The rounds, up to options.max_rounds: (whether the last was final, whether the knots are adapted).
 
-    cost, sigma, determined = assess_noise_and_determinacy(summary, sigma, sigma_source, nominal_delay_s, warnings,
-                                                           estimate=estimate, std_s=std)
-    noise_summary = {"model": ("per frame" if weights_per_observation else "one white sigma + residual structure")
-                     if per_frame else "one sigma for the video",
-                     "white_sigma_px": {"median": float(np.median(white)), "p10": float(np.percentile(white, 10)),
-                                        "p90": float(np.percentile(white, 90))},
-                     "fixed_pattern_px": structure.fixed_pattern_px,
-                     "frame_to_frame_correlation": structure.correlation,
-                     "sigma_d_inflation": structure.inflation}
+        Rounds are solved loosely, except the final one: tight, then sigma_d alone. A round is final when
+        the round before split few segments (those rarely split again; if the final round still splits
+        more than chance would, another round follows). Otherwise a polish on the final knots ends the
+        solve. The first round is final only from knots already adapted and errors already weighted by the
+        noise model's fixed-pattern part (the whole video from its halves): otherwise its residuals give
+        that part, which weighs the errors of the rounds after it (and of sigma_d)."""
+        max_rounds, trajectory = self.options.max_rounds, self.trajectory
+        adapted = not self.adaptive_knots
+        final = False
+        if adapted_start and self.per_frame and start_fixed_pattern_px is not None \
+                and np.isfinite(start_fixed_pattern_px):
+            self.obs_sigma = np.sqrt(self.white ** 2 + float(start_fixed_pattern_px) ** 2)
+            self.use_sigma(self.obs_sigma)
+            final = True
+        for round_index in range(max(1, max_rounds)):
+            last_chance = round_index == max_rounds - 1
+            # a final round usually ends the adaptation: sigma_d comes with it (wasted if it splits again)
+            _set_tolerance(self.solver, final=final, covariance=final and self.estimate)
+            self._solve()
+            summary = self.summary
+            cost = summary.measurement_cost / max(1, 2 * summary.num_error_terms)
+            segment_cost = summary.segment_cost
+            if self.per_frame:
+                # what the residuals say beyond the white part; the split test sees errors weighted by it
+                self.structure = noise.residual_structure(self.used, np.asarray(summary.residual_px), self.white)
+                new_sigma = np.sqrt(self.white ** 2 + self.structure.fixed_pattern_px ** 2)
+                sq = np.asarray(summary.standardised_sq) * (self.obs_sigma / new_sigma) ** 2
+                segment_cost = _segment_sums(trajectory, np.asarray(summary.observation_time_s), sq,
+                                             len(summary.segment_cost))
+            new_knots, at_cap = _split_segments(trajectory, segment_cost, summary.segment_count,
+                                                self.min_segment_s, SPLIT_MARGIN_SIGMAS,
+                                                self.structure.correlation) if self.adaptive_knots else ([], 0)
+            # splits no more than chance would make on a well-modelled trajectory end the adaptation (not in
+            # the first round from PnP, whose knots are too few on purpose)
+            if (round_index > 0 or adapted_start) and cost <= CHANCE_STOP_MAX_COST and \
+                    len(new_knots) <= CHANCE_SPLIT_FRACTION * trajectory.num_segments:
+                new_knots = []
+            if round_index == 0 and final and self.per_frame and \
+                    np.max(np.abs(new_sigma / self.obs_sigma - 1.0)) > START_WEIGHTS_TOLERANCE:
+                final = False   # the start's weights (the halves' fixed pattern) are not this video's: re-weigh, polish
+            if self.per_frame and not (final and not new_knots):  # the next solve weighs the errors by it
+                self.obs_sigma = new_sigma
+                self.use_sigma(self.obs_sigma)
+            record = RoundRecord(round_index, trajectory.num_segments, self.d, float("nan"), cost, summary.rms_px,
+                                 0 if last_chance else len(new_knots), at_cap, summary.iterations,
+                                 summary.solve_time_s)
+            self.history.append(record)
+            if self.progress:
+                self.progress(record)
+            if not new_knots:
+                adapted = True
+                break
+            if last_chance:
+                break
+            for t in new_knots:
+                trajectory.insert_knot(t)
+            final = len(new_knots) <= _FINAL_AFTER_SPLITS * trajectory.num_segments
+        return final, adapted
+
+    def polish(self) -> None:
+        """The final solve at tight tolerance on the final knots, with the covariance of d."""
+        _set_tolerance(self.solver, final=True, covariance=self.estimate)
+        self._solve()
+        if self.per_frame:
+            self.structure = noise.residual_structure(self.used, np.asarray(self.summary.residual_px), self.white)
+        self.history[-1].iterations += self.summary.iterations
+        self.history[-1].solve_time_s += self.summary.solve_time_s
+
+
+def _fit_warnings(warnings: list, summary, structure: noise.ResidualStructure, last: RoundRecord, cost: float,
+                  sigma: float, options: LineDelayOptions, min_segment_s: float, *, estimate: bool,
+                  adaptive_knots: bool) -> None:
+    """What the residuals say about the fit, one line each: repeated errors, segments at their
+    shortest that still fit badly, noise above sigma, clamped weights."""
     if estimate and structure.inflation > 1.5:
         warnings.append(f"the detection errors repeat from frame to frame (correlation {structure.correlation:.2f}: "
                         f"a nearly still board); sigma_d is widened x{structure.inflation:.1f} for it")
-    if cost > 1.5 and adaptive_knots and history[-1].segments_at_cap > 0:
-        warnings.append(f"{history[-1].segments_at_cap} trajectory segments are at the shortest allowed length "
+    if cost > 1.5 and adaptive_knots and last.segments_at_cap > 0:
+        warnings.append(f"{last.segments_at_cap} trajectory segments are at the shortest allowed length "
                         f"({min_segment_s * 1e3:.1f} ms) and still fit badly: the motion is faster than the spline can "
                         "follow, so sigma_d is optimistic (lower min_segment_s, or move more smoothly)")
     if cost > 1.5:
-        hint = ("outliers are down-weighted by the robust loss" if robust_loss != "none"
+        hint = ("outliers are down-weighted by the robust loss" if options.robust_loss != "none"
                 else "or there are outliers (try robust_loss='huber')")
         warnings.append(f"normalised cost J/2N = {cost:.2f} > 1.5: the detection noise is larger than "
                         f"sigma = {sigma:.3f} px, {hint}")
     if summary.clamped_weights:
         warnings.append(f"{summary.clamped_weights} observations move down the image nearly as fast as the "
                         "shutter; their error weights were clamped")
-    solve_warnings(summary, warnings)
-    if refine_intrinsics:
-        intrinsics = _intrinsics_summary(summary, start_camera, camera, prior, structure.inflation if estimate else 1.0,
-                                         warnings)
-
-    return LineDelayResult(
-        line_delay_s=d, line_delay_std_s=std, readout_time_s=d * rows, rows=rows,
-        trajectory=trajectory, knots=np.asarray(trajectory.breakpoints), rms_px=summary.rms_px,
-        normalised_cost=cost, pixel_sigma=sigma, pixel_sigma_source=sigma_source,
-        converged=bool(summary.converged), determined=determined, warnings=warnings, history=history,
-        frames_total=frames_total, frames_used=used.num_frames, observations=summary.num_error_terms,
-        initial_line_delay_s=initial_d, solve_time_s=time.perf_counter() - started,
-        segment_cost=np.asarray(summary.segment_cost), segment_count=np.asarray(summary.segment_count),
-        observation_time_s=np.asarray(summary.observation_time_s), residual_px=np.asarray(summary.residual_px),
-        image_velocity_px_s=np.asarray(summary.image_velocity_px_s),
-        standardised_sq=np.asarray(summary.standardised_sq), frame_poses=used_poses, used_observations=used,
-        observation_sigma_px=obs_sigma, noise=noise_summary, solver_line_delay_std_s=solver_std,
-        camera=camera if refine_intrinsics else None, intrinsics=intrinsics)
 
 
 def refit_with_intrinsics(result: LineDelayResult, camera: CameraModel, options: LineDelayOptions, *,
