@@ -344,7 +344,7 @@ def calibrate_frames(frames, image_size: tuple[int, int], options: Optional[Self
     line_delay_mode, line_delay_given = _line_delay_mode(options, int(image_size[1]))
     # the filter's measurements are moved to one time per frame by the line delay given (a prior's mean)
     line_delay_s = line_delay_given[0] if line_delay_given else 0.0
-    bundle, restarts, max_f_half_width = options.bundle, options.restarts, options.determined_within
+    bundle, restarts = options.bundle, options.restarts
     fe = front_end if front_end is not None else options.front_end
     if grid is None:
         grid = _grid_of(options, image_size)
@@ -353,13 +353,8 @@ def calibrate_frames(frames, image_size: tuple[int, int], options: Optional[Self
     first_frames, factory = _frame_factory(frames)
     fe_options = fe.options if isinstance(fe, ImageFrontEnd) else fe
     initial = initial_bank(width, height, pixel_size_mm, **grid)
-    search = fe_options
-    features = map_size_bound(sog, search.min_visible, search.max_new_per_frame,
-                              _frame_count(frames, max_frames, expected_frames))
-    needed = predicted_memory_bytes(len(initial), features, (width, height))
-    check_memory(needed, f"self-calibration with {len(initial)} Gaussians, up to {features} map features and "
-                         f"{width}x{height} frames (Gaussians x (18 + 6 x features)^2 x 8 B x {FILTER_MEMORY_FACTOR} "
-                         "+ the frame)")
+    _check_filter_memory(sog, fe_options, len(initial), _frame_count(frames, max_frames, expected_frames),
+                         width, height)
     per_pass = max_frames if max_frames is not None else expected_frames
     checking = restarts and not bundle and factory is not None and not isinstance(fe, ImageFrontEnd)
     total = None if per_pass is None else per_pass * (3 if checking else 1)
@@ -378,21 +373,10 @@ def calibrate_frames(frames, image_size: tuple[int, int], options: Optional[Self
         mean = np.asarray(bank.calibration_mean)
         runs = []
         if checking and bank.num_gaussians == 1:
-            done = len(history)
-            for sign in (-1.0, 1.0):
-                f0 = float(mean[0] * (1.0 + sign * RESTART_OFFSET))
-                one = initial_bank(width, height, pixel_size_mm, **single_gaussian_grid(
-                    width, height, pixel_size_mm, f0=f0, f_sigma=0.5 * RESTART_OFFSET * float(mean[0])))
-
-                def restart_frame(k, running, report, offset=done, f0=f0):
-                    bar.update(offset + k + 1, f"restart from f {f0:.0f} px: {running.calibration_mean[0]:.1f}")
-
-                single, _, _, _ = _run(factory(), width, height, pixel_size_mm, sog, fe_options, one, max_frames,
-                                       restart_frame, line_delay_s)
-                runs.append(Restart(f0=f0, mean=np.asarray(single.calibration_mean),
-                                    bounds_99=np.asarray(single.calibration_bounds_99())))
-                done += len(history)
+            runs = _restarts(factory, mean, width, height, pixel_size_mm, sog, fe_options, max_frames, line_delay_s,
+                             bar, len(history))
         adjusted: tuple = (None, "", {}, None)
+        frame_interval = None
         if bundle:
             bar.update(len(history), "bundle adjustment over the tracks")
             if len(tracks.t_s) != len(states):
@@ -400,34 +384,22 @@ def calibrate_frames(frames, image_size: tuple[int, int], options: Optional[Self
             camera0 = CameraModel("civera-radial", mean, width, height, pixel_size_mm=_pixel_pair(pixel_size_mm))
             adjusted = _adjust(tracks, states, camera0, options, line_delay_mode)
             frame_interval = float(np.median(np.diff(tracks.t_s))) if len(tracks.t_s) > 1 else None
-    warnings = []
-    if bank.num_gaussians > 1:
-        warnings.append(f"{bank.num_gaussians} Gaussians remain in the filter bank: the sequence did not single out "
-                        "one calibration for the filter "
-                        "(move more, with rotation and translation, through a textured scene)")
-    if not bundle and line_delay_s == 0:
-        warnings.append("the rolling shutter is not compensated (no line delay given, no bundle adjustment): on a "
-                        "phone or other rolling-shutter camera give the line delay (`rscalib linedelay`; "
-                        "--line-delay) or let the bundle adjustment estimate it (docs/sog.md §24)")
-    used = np.median(history.features_used)
-    if used < 0.5 * source.options.min_visible:
-        warnings.append(f"few features matched per frame (median {used:.0f}); the scene may lack texture")
+    warnings = _filter_warnings(bank, history, source, bundle=bundle, line_delay_s=line_delay_s)
     filter_bounds = np.asarray(bank.calibration_bounds_99())
     prior = prior_bounds(initial, (width, height))
-    covariance = np.asarray(bank.calibration_cov)
     adj, adj_error, tracks_used, self_check = adjusted
     if adj is not None and self_check is not None:
         adj = _widened(adj, np.asarray(self_check["widen"], float))
     estimate, estimate_from = mean, "filter"
+    covariance = np.asarray(bank.calibration_cov)
     if bundle:
-        determined, reason, bounds = judge_adjustment(adj, adj_error, prior, max_f_half_width, height,
+        determined, reason, bounds = judge_adjustment(adj, adj_error, prior, options.determined_within, height,
                                                       frame_interval)
-        if adj is not None and determined:
-            estimate, estimate_from = adj.camera_params, "bundle adjustment"
-            covariance = np.asarray(adj.covariance_two_way[:5, :5])
-        elif adj is not None:
-            # an estimate the verdict does not stand behind: kept for diagnosis (result.json not_claimed)
-            estimate, estimate_from = adj.camera_params, "bundle adjustment (not determined)"
+        if adj is not None:
+            # not determined: an estimate the verdict does not stand behind, kept for diagnosis
+            # (result.json not_claimed)
+            estimate = adj.camera_params
+            estimate_from = "bundle adjustment" if determined else "bundle adjustment (not determined)"
             covariance = np.asarray(adj.covariance_two_way[:5, :5])
     else:
         determined, reason, bounds = judge_determined(mean, filter_bounds, bank.num_gaussians, runs,
@@ -441,6 +413,56 @@ def calibrate_frames(frames, image_size: tuple[int, int], options: Optional[Self
         adjustment=adj, adjustment_error=adj_error, line_delay_given=line_delay_given, tracks=tracks_used,
         self_check=self_check,
         estimate_from=estimate_from)
+
+
+def _check_filter_memory(sog: SogOptions, fe_options, num_gaussians: int, frames: Optional[int], width: int,
+                         height: int) -> None:
+    """InputError (one line) when the bank's dense covariances would not fit in memory."""
+    features = map_size_bound(sog, fe_options.min_visible, fe_options.max_new_per_frame, frames)
+    needed = predicted_memory_bytes(num_gaussians, features, (width, height))
+    check_memory(needed, f"self-calibration with {num_gaussians} Gaussians, up to {features} map features and "
+                         f"{width}x{height} frames (Gaussians x (18 + 6 x features)^2 x 8 B x {FILTER_MEMORY_FACTOR} "
+                         "+ the frame)")
+
+
+def _restarts(factory, mean: np.ndarray, width: int, height: int, pixel_size_mm, sog: SogOptions, fe_options,
+              max_frames: Optional[int], line_delay_s: float, bar, frames_done: int) -> list:
+    """The filter baselines' check: the single filter run again from f RESTART_OFFSET below and above
+    the bank's answer (judge_determined compares where they end)."""
+    runs = []
+    done = frames_done
+    for sign in (-1.0, 1.0):
+        f0 = float(mean[0] * (1.0 + sign * RESTART_OFFSET))
+        one = initial_bank(width, height, pixel_size_mm, **single_gaussian_grid(
+            width, height, pixel_size_mm, f0=f0, f_sigma=0.5 * RESTART_OFFSET * float(mean[0])))
+
+        def restart_frame(k, running, report, offset=done, f0=f0):
+            bar.update(offset + k + 1, f"restart from f {f0:.0f} px: {running.calibration_mean[0]:.1f}")
+
+        single, _, _, _ = _run(factory(), width, height, pixel_size_mm, sog, fe_options, one, max_frames,
+                               restart_frame, line_delay_s)
+        runs.append(Restart(f0=f0, mean=np.asarray(single.calibration_mean),
+                            bounds_99=np.asarray(single.calibration_bounds_99())))
+        done += frames_done
+    return runs
+
+
+def _filter_warnings(bank: SogBank, history, source, *, bundle: bool, line_delay_s: float) -> list:
+    """What the filter's pass says about the sequence: Gaussians left, the rolling shutter not
+    compensated, few features matched."""
+    warnings = []
+    if bank.num_gaussians > 1:
+        warnings.append(f"{bank.num_gaussians} Gaussians remain in the filter bank: the sequence did not single out "
+                        "one calibration for the filter "
+                        "(move more, with rotation and translation, through a textured scene)")
+    if not bundle and line_delay_s == 0:
+        warnings.append("the rolling shutter is not compensated (no line delay given, no bundle adjustment): on a "
+                        "phone or other rolling-shutter camera give the line delay (`rscalib linedelay`; "
+                        "--line-delay) or let the bundle adjustment estimate it (docs/sog.md §24)")
+    used = np.median(history.features_used)
+    if used < 0.5 * source.options.min_visible:
+        warnings.append(f"few features matched per frame (median {used:.0f}); the scene may lack texture")
+    return warnings
 
 
 def _pixel_pair(pixel_size_mm) -> list:
