@@ -137,8 +137,10 @@ class VideoSegment:
     last_time_s is the clock's last accepted time, against which the next segment's first time
     must increase, as in one sequential pass."""
 
-    def __init__(self, path, fps: Optional[float], start: int, stop: Optional[int]):
+    def __init__(self, path, fps: Optional[float], start: int, stop: Optional[int],
+                 decoder_threads: Optional[int] = None):
         self.path, self.fps, self.start, self.stop = path, fps, start, stop
+        self.decoder_threads = decoder_threads   # FFmpeg's (None: its default, one per core)
         self.first: Optional[tuple] = None
         self.after: Optional[tuple] = None
         self.last_time_s: Optional[float] = None
@@ -146,9 +148,7 @@ class VideoSegment:
         self.no_container_times = False
 
     def frames(self, gray: bool = True) -> Iterator[Frame]:
-        # one decoder thread: the workers decoding their segments already keep every core busy, and
-        # FFmpeg's frame threads on top cost 15-20 % more CPU for the same frames
-        capture = _open_capture(self.path, decoder_threads=1)
+        capture = _open_capture(self.path, decoder_threads=self.decoder_threads)
         clock = _ContainerClock(self.fps)
         try:
             if self.start > 0 and not capture.set(cv2.CAP_PROP_POS_FRAMES, self.start):

@@ -217,3 +217,23 @@ def check_segments_against_one_pass(path):
         decoded += frames
         previous, last_time_s = record, segment.last_time_s
     assert decoded == sequential
+
+
+@pytest.mark.parametrize("cores, threads", [(2, 1), (8, 4)])
+def test_segment_workers_decode_with_the_cores_they_leave(mpeg4, monkeypatch, cores, threads):
+    """Two workers on 2 cores decode with one FFmpeg thread each (its frame threads on busy cores cost
+    CPU), on 8 cores with 4 each (a memory-bounded worker count leaves cores to decoding); the
+    detections are those of one sequential pass either way."""
+    sequential = one_pass(mpeg4)
+    plan = segment_plan(open_source(mpeg4).frame_count_estimate, 2, 8)
+    open_capture, opened = video_module._open_capture, []
+
+    def recording(path, decoder_threads=None):
+        opened.append(decoder_threads)
+        return open_capture(path, decoder_threads=decoder_threads)
+
+    monkeypatch.setattr(pipeline, "usable_cores", lambda: cores)
+    monkeypatch.setattr(video_module, "_open_capture", recording)
+    assert_same(by_segments(mpeg4, monkeypatch), sequential)
+    # each segment's capture, and the one this process opens to read the video's header
+    assert opened.count(threads) == len(plan) >= 2 and len(opened) == len(plan) + 1
