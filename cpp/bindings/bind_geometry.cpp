@@ -1,4 +1,4 @@
-// Bindings: rotation vectors; the detectors' local-homography check.
+// Bindings: rotation vectors; the detectors' local-homography check and blur measure.
 #include <cmath>
 #include <string>
 
@@ -7,6 +7,7 @@
 
 #include "bindings.hpp"
 #include "rscalib/core/error.hpp"
+#include "rscalib/geometry/edge_width.hpp"
 #include "rscalib/geometry/local_homography.hpp"
 #include "rscalib/geometry/rotation.hpp"
 
@@ -71,6 +72,36 @@ void BindGeometry(py::module_& m) {
       },
       py::arg("rotation"),
       "phi (angle in [0, pi]) of a rotation matrix; NaN (an unknown rotation) gives NaN.");
+  m.def(
+      "edge_profile_maps",
+      [](const Eigen::MatrixX2d& a, const Eigen::MatrixX2d& b, bool across_rim, double fraction,
+         const Eigen::VectorXd& profile_s, double max_half_px, double min_half_px) {
+        geometry::EdgeProfileMaps maps;
+        {
+          py::gil_scoped_release release;
+          maps = geometry::EdgeProfileMapsFor(a, b, across_rim, fraction, profile_s, max_half_px,
+                                              min_half_px);
+        }
+        return py::make_tuple(maps.map_x, maps.map_y, maps.half_px);
+      },
+      py::arg("a"), py::arg("b"), py::arg("across_rim"), py::arg("fraction"), py::arg("profile_s"),
+      py::arg("max_half_px"), py::arg("min_half_px"),
+      "(map_x, map_y, half_px): where cv2.remap samples an intensity profile across each target "
+      "edge (a, b: its ends' pixels, (m, 2)), as float32 maps (one row per kept edge), and each "
+      "profile's half length; rscalib.detection.quality.edge_width_px.");
+  m.def(
+      "edge_width_from_profiles",
+      [](const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic,
+                                              Eigen::RowMajor>>& profiles,
+         const Eigen::VectorXd& half_px, double min_contrast) {
+        py::gil_scoped_release release;
+        return geometry::EdgeWidthFromProfiles(profiles, half_px, min_contrast);
+      },
+      py::arg("profiles"), py::arg("half_px"), py::arg("min_contrast"),
+      "The 75th percentile of the edge widths (px) of sampled profiles (m, samples; grey levels) "
+      "of "
+      "half lengths half_px; NaN if no profile has more than min_contrast grey levels of "
+      "contrast.");
   m.def(
       "local_homography_residual",
       [](const Eigen::MatrixX2d& target_xy, const Eigen::MatrixX2d& uv,

@@ -6,7 +6,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BSpline', 'BundleOptions', 'BundleResult', 'CameraModel', 'InputError', 'LinearInterpOptions', 'LinearInterpSummary', 'RsSolveSummary', 'RsSolverOptions', 'SogBank', 'SogOptions', 'SogUpdateReport', 'error_noise_map', 'evaluate_line_delay', 'evaluate_rs_cost', 'fit_bspline', 'linear_interp_pose_state', 'local_homography_residual', 'poses_at', 'rotation_matrix_to_vector', 'rotation_vector_to_matrix', 'solve_bundle', 'solve_line_delay', 'solve_line_delay_linear', 'standardisation_weight', 'unwrap_rotation_vectors']
+__all__: list[str] = ['BSpline', 'BundleOptions', 'BundleResult', 'CameraModel', 'InputError', 'LinearInterpOptions', 'LinearInterpSummary', 'RsSolveSummary', 'RsSolverOptions', 'SogBank', 'SogOptions', 'SogUpdateReport', 'edge_profile_maps', 'edge_width_from_profiles', 'error_noise_map', 'evaluate_line_delay', 'evaluate_rs_cost', 'fit_bspline', 'linear_interp_pose_state', 'local_homography_residual', 'poses_at', 'rotation_matrix_to_vector', 'rotation_vector_to_matrix', 'solve_bundle', 'solve_line_delay', 'solve_line_delay_linear', 'standardisation_weight', 'unwrap_rotation_vectors']
 class InputError(ValueError):
     pass
 class BSpline:
@@ -1184,6 +1184,14 @@ class BundleResult:
         """
         (N) false: dropped at the start
         """
+def edge_profile_maps(a: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], b: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], across_rim: bool, fraction: typing.SupportsFloat | typing.SupportsIndex, profile_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], max_half_px: typing.SupportsFloat | typing.SupportsIndex, min_half_px: typing.SupportsFloat | typing.SupportsIndex) -> tuple[typing.Annotated[numpy.typing.NDArray[numpy.float32], "[m, n]"], typing.Annotated[numpy.typing.NDArray[numpy.float32], "[m, n]"], typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]]:
+    """
+    (map_x, map_y, half_px): where cv2.remap samples an intensity profile across each target edge (a, b: its ends' pixels, (m, 2)), as float32 maps (one row per kept edge), and each profile's half length; rscalib.detection.quality.edge_width_px.
+    """
+def edge_width_from_profiles(profiles: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]", "flags.c_contiguous"], half_px: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], min_contrast: typing.SupportsFloat | typing.SupportsIndex) -> float:
+    """
+    The 75th percentile of the edge widths (px) of sampled profiles (m, samples; grey levels) of half lengths half_px; NaN if no profile has more than min_contrast grey levels of contrast.
+    """
 def error_noise_map(line_delay_s: typing.SupportsFloat | typing.SupportsIndex, image_velocity_px_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[2, 1]"]) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[2, 2]"]:
     """
     A = I - d [[0, u_dot], [0, v_dot]] (Oth et al. 2013, eq. 15-21; docs/formulation.md §4).

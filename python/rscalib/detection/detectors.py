@@ -330,9 +330,14 @@ def _grid_window(uv: np.ndarray, rows: int, cols: int) -> int:
     """cornerSubPix half-window: a quarter of the smallest grid step (the window stays well
     inside the four squares around the corner)."""
     grid = uv.reshape(rows, cols, 2)
-    steps = np.concatenate([np.linalg.norm(np.diff(grid, axis=1), axis=2).ravel(),
-                            np.linalg.norm(np.diff(grid, axis=0), axis=2).ravel()])
-    return int(np.clip(round(steps.min() / 4.0), 2, 12))
+    along_cols, along_rows = grid[:, 1:] - grid[:, :-1], grid[1:] - grid[:-1]
+    # the smallest squared step, then its root: np.linalg.norm's numbers (x*x + y*y, rounded
+    # alike), without its per-call overhead (this runs on every detected and tracked frame)
+    smallest_sq = min(float((along_cols[..., 0] * along_cols[..., 0] + along_cols[..., 1] * along_cols[..., 1]).min(
+                          initial=np.inf)),
+                      float((along_rows[..., 0] * along_rows[..., 0] + along_rows[..., 1] * along_rows[..., 1]).min(
+                          initial=np.inf)))
+    return int(min(max(round(math.sqrt(smallest_sq) / 4.0), 2), 12))
 
 
 def _affine(xy: np.ndarray, uv: np.ndarray) -> np.ndarray:

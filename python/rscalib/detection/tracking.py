@@ -212,11 +212,16 @@ class CheckerboardTracker:
     def _verified(self, gray: np.ndarray, predicted: np.ndarray, uv: np.ndarray) -> bool:
         rows, cols = self.grid_shape
         grid = uv.reshape(rows, cols, 2)
-        # refined corners may be renumbered (ids): compare each with its nearest prediction
-        difference = uv[:, None, :] - predicted[None, :, :]
-        shift_sq = np.einsum("ijk,ijk->ij", difference, difference).min(axis=1)
-        if np.sqrt(shift_sq.max()) > MAX_SHIFT_STEPS * _min_step(grid):
-            return False
+        # refined corners may be renumbered (ids): compare each with its nearest prediction. Its
+        # own prediction first: when every corner is near it, so is the nearest (the usual case,
+        # without the all-pairs distances)
+        limit = MAX_SHIFT_STEPS * _min_step(grid)
+        own = uv - predicted
+        if np.sqrt(np.einsum("ij,ij->i", own, own).max()) > limit:
+            difference = uv[:, None, :] - predicted[None, :, :]
+            shift_sq = np.einsum("ijk,ijk->ij", difference, difference).min(axis=1)
+            if np.sqrt(shift_sq.max()) > limit:
+                return False
         return corners_are_saddles(gray, grid)
 
 

@@ -8,6 +8,7 @@ third differences over all frames therefore estimates sigma without any trajecto
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -22,8 +23,15 @@ _THIRD_DIFFERENCE_VARIANCE = 20.0
 
 def grid_line_quadruples(target_points: np.ndarray, tolerance_m: float = 1e-6) -> np.ndarray:
     """(Q, 4) ids (a, b, c, d) of target points that are collinear and equally spaced by the
-    smallest point spacing: b = a + s, c = a + 2s, d = a + 3s."""
-    points = np.asarray(target_points, dtype=np.float64)
+    smallest point spacing: b = a + s, c = a + 2s, d = a + 3s (read-only: shared by every solve of
+    the same target, each of which asked for it anew at 50 ms a time)."""
+    points = np.ascontiguousarray(target_points, dtype=np.float64)
+    return _grid_line_quadruples(points.tobytes(), points.shape, float(tolerance_m))
+
+
+@functools.lru_cache(maxsize=16)
+def _grid_line_quadruples(points_bytes: bytes, shape: tuple, tolerance_m: float) -> np.ndarray:
+    points = np.frombuffer(points_bytes, dtype=np.float64).reshape(shape)
     if len(points) < 4:
         return np.zeros((0, 4), dtype=np.int64)
     diff = points[None, :, :] - points[:, None, :]
@@ -43,7 +51,9 @@ def grid_line_quadruples(target_points: np.ndarray, tolerance_m: float = 1e-6) -
             ids = [index.get(key(p + k * s)) for k in (1, 2, 3)]
             if all(i is not None for i in ids):
                 quads.append([a, *ids])
-    return np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    quads = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    quads.flags.writeable = False
+    return quads
 
 
 def third_differences(observations: Observations, quadruples: np.ndarray | None = None) -> np.ndarray:
@@ -98,14 +108,18 @@ def frame_pixel_sigma(observations: Observations, video_sigma: float,
     table = np.full((observations.num_frames, num_points, 2), np.nan)
     table[observations.frame_index, observations.point_id] = observations.uv
     a, b, c, d = (table[:, quadruples[:, k]] for k in range(4))
-    third = (d - 3.0 * c + 3.0 * b - a).reshape(observations.num_frames, -1)
-    for f in range(observations.num_frames):
-        x = third[f][np.isfinite(third[f])]
-        if x.size < 4:
-            continue
-        own = np.median(np.abs(x)) * _MAD_TO_SIGMA / np.sqrt(_THIRD_DIFFERENCE_VARIANCE)
-        n = x.size
-        sigma[f] = math.sqrt((n * own ** 2 + SHRINK_SAMPLES * video_sigma ** 2) / (n + SHRINK_SAMPLES))
+    third = np.abs(d - 3.0 * c + 3.0 * b - a).reshape(observations.num_frames, -1)
+    # each frame's median |x| over its finite samples, all frames at once (NaNs sort last; the
+    # mean of the middle two of an even count, as np.median): a loop over frames took 0.1 s a solve
+    n = np.isfinite(third).sum(axis=1)
+    ordered = np.sort(third, axis=1)
+    rows = np.flatnonzero(n >= 4)
+    upper = ordered[rows, n[rows] // 2]
+    lower = ordered[rows, (n[rows] - 1) // 2]
+    own = np.where(n[rows] % 2 == 1, upper, (lower + upper) / 2.0) * _MAD_TO_SIGMA / np.sqrt(_THIRD_DIFFERENCE_VARIANCE)
+    count = n[rows].astype(np.float64)
+    own_squared = np.array([x ** 2 for x in own.tolist()])   # libm's pow, as the loop had it (not x * x)
+    sigma[rows] = np.sqrt((count * own_squared + SHRINK_SAMPLES * video_sigma ** 2) / (count + SHRINK_SAMPLES))
     return np.maximum(sigma, 1e-3)
 
 

@@ -8,8 +8,8 @@
 namespace rscalib::geometry {
 
 // target_xy (n x 2): the points' target coordinates; uv (n x 2): their pixels; nearest (n x k):
-// each point's nearest target neighbours (rows of target_xy / uv, not itself). Returns for each
-// point |uv - H_i(xy)| / |uv(nearest(i, 0)) - uv| (in grid steps), H_i fitted to its k
+// each point's nearest target neighbours (rows of target_xy / uv, not itself; k <= 16). Returns for
+// each point |uv - H_i(xy)| / |uv(nearest(i, 0)) - uv| (in grid steps), H_i fitted to its k
 // neighbours. NaN where the fit is degenerate or a value is not finite; the caller decides
 // which neighbourhoods are well posed.
 Eigen::VectorXd LocalHomographyResidual(const Eigen::MatrixX2d& target_xy,
