@@ -1,4 +1,4 @@
-// Bindings: rotation vectors; the detectors' local-homography check and blur measure.
+// Bindings: rotation vectors; the detectors' local-homography check, blur measure and saddle check.
 #include <cmath>
 #include <string>
 
@@ -7,6 +7,7 @@
 
 #include "bindings.hpp"
 #include "rscalib/core/error.hpp"
+#include "rscalib/geometry/corner_saddles.hpp"
 #include "rscalib/geometry/edge_width.hpp"
 #include "rscalib/geometry/local_homography.hpp"
 #include "rscalib/geometry/rotation.hpp"
@@ -72,6 +73,31 @@ void BindGeometry(py::module_& m) {
       },
       py::arg("rotation"),
       "phi (angle in [0, pi]) of a rotation matrix; NaN (an unknown rotation) gives NaN.");
+  m.def(
+      "saddle_sample_points",
+      [](const Eigen::MatrixX2d& grid, int rows, int cols, double fraction) {
+        geometry::SampleMap map_x, map_y;
+        {
+          py::gil_scoped_release release;
+          geometry::SaddleSamplePoints(grid, rows, cols, fraction, &map_x, &map_y);
+        }
+        return py::make_tuple(map_x, map_y);
+      },
+      py::arg("grid"), py::arg("rows"), py::arg("cols"), py::arg("fraction"),
+      "(map_x, map_y), (rows * cols, 4) float32: where cv2.remap samples the quadrants of each "
+      "corner of a grid ((rows * cols, 2), row-major); "
+      "rscalib.detection.tracking.corners_are_saddles.");
+  m.def(
+      "corners_are_saddles",
+      [](const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>>& values,
+         const Eigen::Ref<const Eigen::Matrix<bool, Eigen::Dynamic, 1>>& even, double min_contrast,
+         double min_gap_fraction) {
+        py::gil_scoped_release release;
+        return geometry::CornersAreSaddles(values, even, min_contrast, min_gap_fraction);
+      },
+      py::arg("values"), py::arg("even"), py::arg("min_contrast"), py::arg("min_gap_fraction"),
+      "Whether the grey levels sampled at the saddle points ((n, 4)) show a checkerboard saddle at "
+      "every corner (even: each corner's parity).");
   m.def(
       "edge_profile_maps",
       [](const Eigen::MatrixX2d& a, const Eigen::MatrixX2d& b, bool across_rim, double fraction,

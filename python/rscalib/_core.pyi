@@ -6,7 +6,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BSpline', 'BundleOptions', 'BundleResult', 'CameraModel', 'InputError', 'LinearInterpOptions', 'LinearInterpSummary', 'RsSolveSummary', 'RsSolverOptions', 'SogBank', 'SogOptions', 'SogUpdateReport', 'edge_profile_maps', 'edge_width_from_profiles', 'error_noise_map', 'evaluate_line_delay', 'evaluate_rs_cost', 'fit_bspline', 'linear_interp_pose_state', 'local_homography_residual', 'poses_at', 'rotation_matrix_to_vector', 'rotation_vector_to_matrix', 'solve_bundle', 'solve_line_delay', 'solve_line_delay_linear', 'standardisation_weight', 'unwrap_rotation_vectors']
+__all__: list[str] = ['BSpline', 'BundleOptions', 'BundleResult', 'CameraModel', 'InputError', 'LinearInterpOptions', 'LinearInterpSummary', 'RsSolveSummary', 'RsSolverOptions', 'SogBank', 'SogOptions', 'SogUpdateReport', 'corners_are_saddles', 'edge_profile_maps', 'edge_width_from_profiles', 'error_noise_map', 'evaluate_line_delay', 'evaluate_rs_cost', 'fit_bspline', 'linear_interp_pose_state', 'local_homography_residual', 'poses_at', 'rotation_matrix_to_vector', 'rotation_vector_to_matrix', 'saddle_sample_points', 'solve_bundle', 'solve_line_delay', 'solve_line_delay_linear', 'standardisation_weight', 'unwrap_rotation_vectors']
 class InputError(ValueError):
     pass
 class BSpline:
@@ -1184,6 +1184,10 @@ class BundleResult:
         """
         (N) false: dropped at the start
         """
+def corners_are_saddles(values: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 4]", "flags.c_contiguous"], even: typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"], min_contrast: typing.SupportsFloat | typing.SupportsIndex, min_gap_fraction: typing.SupportsFloat | typing.SupportsIndex) -> bool:
+    """
+    Whether the grey levels sampled at the saddle points ((n, 4)) show a checkerboard saddle at every corner (even: each corner's parity).
+    """
 def edge_profile_maps(a: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], b: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], across_rim: bool, fraction: typing.SupportsFloat | typing.SupportsIndex, profile_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], max_half_px: typing.SupportsFloat | typing.SupportsIndex, min_half_px: typing.SupportsFloat | typing.SupportsIndex) -> tuple[typing.Annotated[numpy.typing.NDArray[numpy.float32], "[m, n]"], typing.Annotated[numpy.typing.NDArray[numpy.float32], "[m, n]"], typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]]:
     """
     (map_x, map_y, half_px): where cv2.remap samples an intensity profile across each target edge (a, b: its ends' pixels, (m, 2)), as float32 maps (one row per kept edge), and each profile's half length; rscalib.detection.quality.edge_width_px.
@@ -1229,6 +1233,10 @@ def rotation_matrix_to_vector(rotation: typing.Annotated[numpy.typing.ArrayLike,
 def rotation_vector_to_matrix(rotation_vector: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[3, 1]"]) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[3, 3]"]:
     """
     R = exp([phi]x) of a rotation vector phi (radians); NaN (an unknown rotation) gives NaN.
+    """
+def saddle_sample_points(grid: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 2]"], rows: typing.SupportsInt | typing.SupportsIndex, cols: typing.SupportsInt | typing.SupportsIndex, fraction: typing.SupportsFloat | typing.SupportsIndex) -> tuple[typing.Annotated[numpy.typing.NDArray[numpy.float32], "[m, 4]"], typing.Annotated[numpy.typing.NDArray[numpy.float32], "[m, 4]"]]:
+    """
+    (map_x, map_y), (rows * cols, 4) float32: where cv2.remap samples the quadrants of each corner of a grid ((rows * cols, 2), row-major); rscalib.detection.tracking.corners_are_saddles.
     """
 def solve_bundle(camera: CameraModel, keyframe_poses: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], observation_keyframe: numpy.ndarray, observation_point: numpy.ndarray, uv_px: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], image_velocity_px_s: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], point_anchor: numpy.ndarray, points: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], free_intrinsics: collections.abc.Sequence[bool] | None = None, line_delay_s: typing.SupportsFloat | typing.SupportsIndex = 0.0, estimate_line_delay: bool = False, line_delay_prior: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex] | None = None, reference_row: typing.SupportsFloat | typing.SupportsIndex = 0.0, options: BundleOptions = ...) -> BundleResult:
     """

@@ -37,6 +37,7 @@ from typing import Optional, Sequence
 import cv2
 import numpy as np
 
+from .. import _core
 from ..io.targets import Target
 from .detectors import Detector, FrameDetection, grid_reindexings
 from .options import DetectOptions
@@ -252,46 +253,16 @@ def corners_are_saddles(gray: np.ndarray, grid: np.ndarray, mask: Optional[np.nd
     one diagonal pair is brighter than the other by a clear gap, and which pair is bright
     alternates from corner to corner. A corner of a single square at the board's edge (three
     bright quadrants) or an occluded corner fails."""
-    along_cols, along_rows = _gradient(grid, 1), _gradient(grid, 0)
-    diagonal, anti = along_cols + along_rows, along_cols - along_rows
-    points = np.stack([grid + 0.3 * diagonal, grid - 0.3 * diagonal, grid + 0.3 * anti, grid - 0.3 * anti],
-                      axis=2).reshape(-1, 4, 2).astype(np.float32)
-    even = _even_corners(grid.shape[:2])
+    rows, cols = grid.shape[:2]
+    if rows < 2 or cols < 2:
+        return False
+    # the sample places and the decision in the core (numpy's numbers), the sampling by OpenCV
+    map_x, map_y = _core.saddle_sample_points(grid.reshape(-1, 2), rows, cols, 0.3)
+    even = _even_corners((rows, cols))
     if mask is not None:
-        points, even = points[mask.ravel()], even[mask.ravel()]
-    values = cv2.remap(gray, points[..., 0], points[..., 1], cv2.INTER_LINEAR,
-                       borderMode=cv2.BORDER_REPLICATE).astype(np.float64)  # (n, 4)
-    diagonal_bright = values[:, :2].min(1) - values[:, 2:].max(1)   # gap if the diagonal pair is bright
-    anti_bright = values[:, 2:].min(1) - values[:, :2].max(1)
-    # the board's colour convention is the one most corners follow
-    convention = np.where(even, diagonal_bright, anti_bright)
-    other = np.where(even, anti_bright, diagonal_bright)
-    gap = convention if _median(convention) >= _median(other) else other
-    contrast = _median(values.max(1) - values.min(1))
-    return contrast >= MIN_CONTRAST and float(gap.min()) >= MIN_SADDLE_GAP * contrast
-
-
-def _gradient(grid: np.ndarray, axis: int) -> np.ndarray:
-    """np.gradient(grid, axis=axis) of a (rows, cols, 2) grid (unit spacing, first-order ends), the
-    same numbers without its per-call overhead (this runs on every tracked frame)."""
-    if grid.shape[axis] < 2:
-        return np.gradient(grid, axis=axis)
-    g = grid if axis == 0 else grid.transpose(1, 0, 2)
-    out = np.empty(g.shape)
-    out[1:-1] = (g[2:] - g[:-2]) / 2.0
-    out[0] = g[1] - g[0]
-    out[-1] = g[-1] - g[-2]
-    return out if axis == 0 else out.transpose(1, 0, 2)
-
-
-def _median(values: np.ndarray) -> float:
-    """np.median of a 1-D array (the mean of the middle two of an even count), without its overhead."""
-    n = len(values)
-    half = n // 2
-    if n % 2:
-        return float(np.partition(values, half)[half])
-    part = np.partition(values, (half - 1, half))
-    return float((part[half - 1] + part[half]) / 2.0)
+        map_x, map_y, even = map_x[mask.ravel()], map_y[mask.ravel()], even[mask.ravel()]
+    values = cv2.remap(gray, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return _core.corners_are_saddles(values.astype(np.float64), even, MIN_CONTRAST, MIN_SADDLE_GAP)
 
 
 @functools.lru_cache(maxsize=16)

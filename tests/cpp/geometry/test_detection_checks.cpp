@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include "rscalib/geometry/corner_saddles.hpp"
 #include "rscalib/geometry/edge_width.hpp"
 #include "rscalib/geometry/local_homography.hpp"
 
@@ -88,4 +89,40 @@ TEST(EdgeWidth, MapsCrossTheEdgeAtItsMiddle) {
     EXPECT_FLOAT_EQ(maps.map_x(0, j), 30.0f);  // across a horizontal edge
   EXPECT_FLOAT_EQ(maps.map_y(0, 0), 20.0f - 16.0f);
   EXPECT_FLOAT_EQ(maps.map_y(0, 47), 20.0f + 16.0f);
+}
+
+TEST(CornerSaddles, SamplesFollowTheGridsDiagonals) {
+  // a 3 x 4 grid of 10 px steps: the samples lie 0.3 x (10, 10) and 0.3 x (10, -10) from each
+  // corner
+  Eigen::MatrixX2d grid(12, 2);
+  for (int i = 0; i < 12; ++i) grid.row(i) << 50.0 + 10.0 * (i % 4), 80.0 + 10.0 * (i / 4);
+  SampleMap map_x, map_y;
+  SaddleSamplePoints(grid, 3, 4, 0.3, &map_x, &map_y);
+  for (int i = 0; i < 12; ++i) {
+    EXPECT_FLOAT_EQ(map_x(i, 0), static_cast<float>(grid(i, 0) + 3.0));
+    EXPECT_FLOAT_EQ(map_y(i, 0), static_cast<float>(grid(i, 1) + 3.0));
+    EXPECT_FLOAT_EQ(map_x(i, 2), static_cast<float>(grid(i, 0) + 3.0));
+    EXPECT_FLOAT_EQ(map_y(i, 2), static_cast<float>(grid(i, 1) - 3.0));
+  }
+  EXPECT_THROW(SaddleSamplePoints(grid, 2, 4, 0.3, &map_x, &map_y), std::exception);
+}
+
+TEST(CornerSaddles, AlternatingSaddlesPassAnEdgeCornerFails) {
+  const int n = 12;
+  Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor> values(n, 4);
+  Eigen::Matrix<bool, Eigen::Dynamic, 1> even(n);
+  for (int i = 0; i < n; ++i) {
+    even[i] = ((i / 4) + (i % 4)) % 2 == 0;
+    if (even[i]) {
+      values.row(i) << 200, 210, 30, 40;  // the diagonal pair bright
+    } else {
+      values.row(i) << 35, 25, 205, 195;
+    }
+  }
+  EXPECT_TRUE(CornersAreSaddles(values, even, 20.0, 0.25));
+  values.row(5) << 200, 210, 190, 40;  // three bright quadrants: a square's outer corner
+  EXPECT_FALSE(CornersAreSaddles(values, even, 20.0, 0.25));
+  Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor> flat =
+      Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>::Constant(n, 4, 128.0);
+  EXPECT_FALSE(CornersAreSaddles(flat, even, 20.0, 0.25));  // no contrast
 }

@@ -81,3 +81,47 @@ def test_width_checks_its_input():
         _core.edge_width_from_profiles(np.zeros((3, 48)), np.ones(2), 20.0)
     with pytest.raises(ValueError, match="one row per edge"):
         _core.edge_profile_maps(np.zeros((3, 2)), np.zeros((2, 2)), False, 0.4, _PROFILE_S, 16.0, 1.5)
+
+
+def numpy_saddles(values, even):
+    """The tracker's saddle decision as numpy wrote it (values: (n, 4) grey levels at the samples)."""
+    diagonal_bright = values[:, :2].min(1) - values[:, 2:].max(1)
+    anti_bright = values[:, 2:].min(1) - values[:, :2].max(1)
+    convention = np.where(even, diagonal_bright, anti_bright)
+    other = np.where(even, anti_bright, diagonal_bright)
+    gap = convention if np.median(convention) >= np.median(other) else other
+    contrast = np.median(values.max(1) - values.min(1))
+    return bool(contrast >= 20.0 and gap.min() >= 0.25 * contrast)
+
+
+def numpy_saddle_points(grid):
+    """The four sample places of each corner of a (rows, cols, 2) grid, as numpy computed them."""
+    along_cols, along_rows = np.gradient(grid, axis=1), np.gradient(grid, axis=0)
+    diagonal, anti = along_cols + along_rows, along_cols - along_rows
+    points = np.stack([grid + 0.3 * diagonal, grid - 0.3 * diagonal, grid + 0.3 * anti, grid - 0.3 * anti],
+                      axis=2).reshape(-1, 4, 2).astype(np.float32)
+    return points[..., 0], points[..., 1]
+
+
+def test_saddle_places_and_decision_are_numpys():
+    rng = np.random.default_rng(11)
+    decisions = []
+    for trial in range(300):
+        rows, cols = int(rng.integers(2, 9)), int(rng.integers(2, 12))
+        step = rng.uniform(5, 60)
+        r, c = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+        grid = np.stack([c * step, r * step * rng.uniform(0.6, 1.4)], axis=2) + rng.uniform(0, 300, 2)
+        grid += rng.normal(0, rng.choice([0.01, 0.5, 3.0]), grid.shape)
+        expected = numpy_saddle_points(grid)
+        got = _core.saddle_sample_points(grid.reshape(-1, 2), rows, cols, 0.3)
+        assert all(np.array_equal(e, g) for e, g in zip(expected, got))
+        even = ((r + c) % 2 == 0).ravel()
+        bright, dark = rng.uniform(120, 255), rng.uniform(0, 110)
+        values = np.where(even[:, None], [[bright, bright, dark, dark]], [[dark, dark, bright, bright]])
+        if trial % 2:
+            values = values[:, [2, 3, 0, 1]]   # the other colour convention
+        values = np.clip(values + rng.normal(0, rng.choice([1, 20, 60]), values.shape), 0, 255).round()
+        decision = _core.corners_are_saddles(values, even, 20.0, 0.25)
+        assert decision == numpy_saddles(values, even)
+        decisions.append(decision)
+    assert 0 < sum(decisions) < len(decisions)   # both answers were tested
