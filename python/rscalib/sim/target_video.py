@@ -382,37 +382,8 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
         1 + depth·sin(2π f t + phase) (instead of intensity_modulation); recorded in truth.json.
         supersample, exposure_samples, workers: see :class:`RollingShutterRenderer`.
     """
-    for name, value in (("fps", fps), ("duration", duration_s)):
-        if not (math.isfinite(value) and value > 0):
-            raise InputError(f"{name} must be a positive number (got {value})")
-    if not math.isfinite(line_delay_s):
-        raise InputError("line delay must be finite")
-    if not (math.isfinite(exposure_s) and exposure_s >= 0):
-        raise InputError(f"exposure must be >= 0 (got {exposure_s})")
-    if exposure_s > 1.0 / fps:
-        raise InputError(f"exposure {exposure_s * 1e3:.3g} ms exceeds the frame period {1e3 / fps:.3g} ms")
-    if not (math.isfinite(noise) and noise >= 0):
-        raise InputError(f"noise must be >= 0 grey levels (got {noise})")
-    if not (math.isfinite(motion) and motion >= 0):
-        raise InputError(f"motion amplitude must be >= 0 (got {motion})")
-    flicker = None
-    if flicker_hz is not None:
-        if intensity_modulation is not None:
-            raise InputError("give a flicker frequency or an intensity modulation, not both")
-        if not (math.isfinite(flicker_hz) and flicker_hz > 0):
-            raise InputError(f"flicker frequency must be positive (got {flicker_hz})")
-        if not (math.isfinite(flicker_depth) and 0 <= flicker_depth < 1):
-            raise InputError(f"flicker depth must be in [0, 1) (got {flicker_depth})")
-        if not math.isfinite(flicker_phase_rad):
-            raise InputError("flicker phase must be finite")
-        flicker = {"frequency_hz": float(flicker_hz), "depth": float(flicker_depth),
-                   "phase_rad": float(flicker_phase_rad),
-                   "gain": "1 + depth * sin(2 pi frequency_hz t + phase_rad), t = row time (s); "
-                           "radiance above full scale clips"}
-
-        def flicker_gain(t: np.ndarray) -> np.ndarray:
-            return 1.0 + flicker_depth * np.sin(2.0 * np.pi * flicker_hz * t + flicker_phase_rad)
-        intensity_modulation = flicker_gain
+    _check_render_arguments(fps, duration_s, line_delay_s, exposure_s, noise, motion)
+    flicker, intensity_modulation = _flicker(flicker_hz, flicker_depth, flicker_phase_rad, intensity_modulation)
     if camera is None:
         camera = default_camera(_parse_size(size))
     if abs(line_delay_s) * camera.height > 1.0 / fps:
@@ -443,26 +414,13 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
     renderer = RollingShutterRenderer(camera, texture, trajectory, line_delay_s, supersample=supersample,
                                       exposure_s=exposure_s, exposure_samples=exposure_samples,
                                       intensity_modulation=intensity_modulation, workers=workers)
-    uv_rs, uv_gs, uv_mid = [], [], []
-    render_started = time.perf_counter()
     try:
-        with Progress(progress, num_frames, f"rendering {camera.width}x{camera.height}") as bar:
-            for i, t in enumerate(frame_times):
-                frame = to_uint8(renderer.render(t), noise, rng)
-                if writer is not None:
-                    writer.write(frame)
-                if frames_dir is not None:
-                    cv2.imwrite(str(frames_dir / f"frame_{i:06d}.png"), frame)
-                uv_rs.append(_uv_list(renderer.project_rs(t)))
-                uv_gs.append(_uv_list(renderer.project_rs(t, line_delay_s=0.0)))
-                if exposure_s > 0:
-                    uv_mid.append(_uv_list(renderer.project_rs(t, 0.5 * exposure_s)))
-                bar.advance()
+        uv_rs, uv_gs, uv_mid, render_seconds = _render_frames(renderer, frame_times, noise, rng, writer, frames_dir,
+                                                              line_delay_s, exposure_s, progress)
     finally:
         renderer.close()
         if writer is not None:
             writer.release()
-    render_seconds = time.perf_counter() - render_started
     if frames_dir is not None:
         (frames_dir / "timestamps.txt").write_text("".join(f"{t:.9f}\n" for t in frame_times))
 
@@ -471,6 +429,88 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
     target_path = out_dir / "target.yaml"
     target_path.write_text(yaml.safe_dump(target.kalibr_dict(), sort_keys=False))
 
+    truth = _truth(camera, texture, trajectory, frame_times, uv_rs, uv_gs, uv_mid, line_delay_s=line_delay_s, fps=fps,
+                   duration_s=duration_s, noise=noise, exposure_s=exposure_s, exposure_samples=exposure_samples,
+                   supersample=supersample, seed=seed, motion=motion, intensity_modulation=intensity_modulation,
+                   flicker=flicker, video_path=video_path, used_codec=used_codec, frames_dir=frames_dir,
+                   dense_rate_hz=dense_rate_hz)
+    truth_path = out_dir / "truth.json"
+    truth_path.write_text(_compact_json(truth))
+    return RenderedVideo(out_dir=out_dir, video_path=video_path, frames_dir=frames_dir, truth_path=truth_path,
+                         camera_path=camera_path, target_path=target_path, camera=camera, target=target,
+                         trajectory=trajectory, line_delay_s=float(line_delay_s), fps=float(fps),
+                         frame_times_s=frame_times, truth=truth, render_seconds=render_seconds, codec=used_codec)
+
+
+def _check_render_arguments(fps: float, duration_s: float, line_delay_s: float, exposure_s: float, noise: float,
+                            motion: float) -> None:
+    for name, value in (("fps", fps), ("duration", duration_s)):
+        if not (math.isfinite(value) and value > 0):
+            raise InputError(f"{name} must be a positive number (got {value})")
+    if not math.isfinite(line_delay_s):
+        raise InputError("line delay must be finite")
+    if not (math.isfinite(exposure_s) and exposure_s >= 0):
+        raise InputError(f"exposure must be >= 0 (got {exposure_s})")
+    if exposure_s > 1.0 / fps:
+        raise InputError(f"exposure {exposure_s * 1e3:.3g} ms exceeds the frame period {1e3 / fps:.3g} ms")
+    if not (math.isfinite(noise) and noise >= 0):
+        raise InputError(f"noise must be >= 0 grey levels (got {noise})")
+    if not (math.isfinite(motion) and motion >= 0):
+        raise InputError(f"motion amplitude must be >= 0 (got {motion})")
+
+
+def _flicker(flicker_hz: Optional[float], depth: float, phase_rad: float,
+             intensity_modulation: Optional[Callable[[np.ndarray], np.ndarray]]) -> tuple[Optional[dict], Optional[Callable]]:
+    """(truth.json's "flicker", the gain f(t) on the radiance): a flickering light's, else the given
+    modulation unchanged (flicker None)."""
+    if flicker_hz is None:
+        return None, intensity_modulation
+    if intensity_modulation is not None:
+        raise InputError("give a flicker frequency or an intensity modulation, not both")
+    if not (math.isfinite(flicker_hz) and flicker_hz > 0):
+        raise InputError(f"flicker frequency must be positive (got {flicker_hz})")
+    if not (math.isfinite(depth) and 0 <= depth < 1):
+        raise InputError(f"flicker depth must be in [0, 1) (got {depth})")
+    if not math.isfinite(phase_rad):
+        raise InputError("flicker phase must be finite")
+    flicker = {"frequency_hz": float(flicker_hz), "depth": float(depth), "phase_rad": float(phase_rad),
+               "gain": "1 + depth * sin(2 pi frequency_hz t + phase_rad), t = row time (s); "
+                       "radiance above full scale clips"}
+
+    def flicker_gain(t: np.ndarray) -> np.ndarray:
+        return 1.0 + depth * np.sin(2.0 * np.pi * flicker_hz * t + phase_rad)
+    return flicker, flicker_gain
+
+
+def _render_frames(renderer: RollingShutterRenderer, frame_times: np.ndarray, noise: float, rng, writer,
+                   frames_dir: Optional[Path], line_delay_s: float, exposure_s: float,
+                   progress: bool) -> tuple[list, list, list, float]:
+    """Every frame rendered and written, with its true projections: (uv_rs, uv_gs, uv_mid, seconds)."""
+    uv_rs, uv_gs, uv_mid = [], [], []
+    render_started = time.perf_counter()
+    camera = renderer.camera
+    with Progress(progress, len(frame_times), f"rendering {camera.width}x{camera.height}") as bar:
+        for i, t in enumerate(frame_times):
+            frame = to_uint8(renderer.render(t), noise, rng)
+            if writer is not None:
+                writer.write(frame)
+            if frames_dir is not None:
+                cv2.imwrite(str(frames_dir / f"frame_{i:06d}.png"), frame)
+            uv_rs.append(_uv_list(renderer.project_rs(t)))
+            uv_gs.append(_uv_list(renderer.project_rs(t, line_delay_s=0.0)))
+            if exposure_s > 0:
+                uv_mid.append(_uv_list(renderer.project_rs(t, 0.5 * exposure_s)))
+            bar.advance()
+    return uv_rs, uv_gs, uv_mid, time.perf_counter() - render_started
+
+
+def _truth(camera: CameraModel, texture: TargetTexture, trajectory: Trajectory, frame_times: np.ndarray, uv_rs: list,
+           uv_gs: list, uv_mid: list, *, line_delay_s: float, fps: float, duration_s: float, noise: float,
+           exposure_s: float, exposure_samples: Optional[int], supersample: int, seed: int, motion: float,
+           intensity_modulation: Optional[Callable], flicker: Optional[dict], video_path: Optional[Path],
+           used_codec: str, frames_dir: Optional[Path], dense_rate_hz: float) -> dict:
+    """truth.json of a rendered video: what was rendered, its trajectory and the exact projections."""
+    target = texture.target
     readout_end = abs(line_delay_s) * camera.height + exposure_s
     dense_times = np.arange(0.0, frame_times[-1] + readout_end + 1.0 / dense_rate_hz, 1.0 / dense_rate_hz)
     projections = {"uv_rs": uv_rs, "uv_gs": uv_gs,
@@ -479,13 +519,13 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
     if exposure_s > 0:
         projections["uv_rs_mid_exposure"] = uv_mid
         projections["definition"] += "; uv_rs_mid_exposure: at t_i + v d + exposure/2 (blur centroid)"
-    truth = {
+    return {
         "generator": "rscalib.sim.target_video",
         "line_delay_s": float(line_delay_s),
         "readout_time_s": float(line_delay_s) * camera.height,
         "fps": float(fps),
         "duration_s": float(duration_s),
-        "num_frames": num_frames,
+        "num_frames": len(frame_times),
         "frame_times_s": [float(t) for t in frame_times],
         "image_size": [int(camera.width), int(camera.height)],
         "camera": {"model": camera.model, "params": [float(v) for v in camera.params],
@@ -510,12 +550,6 @@ def render_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
         "projections": projections,
         "conventions": "docs/conventions.md: x_c = R x_w + p, rotation_vector = log(R); OpenCV pixels",
     }
-    truth_path = out_dir / "truth.json"
-    truth_path.write_text(_compact_json(truth))
-    return RenderedVideo(out_dir=out_dir, video_path=video_path, frames_dir=frames_dir, truth_path=truth_path,
-                         camera_path=camera_path, target_path=target_path, camera=camera, target=target,
-                         trajectory=trajectory, line_delay_s=float(line_delay_s), fps=float(fps),
-                         frame_times_s=frame_times, truth=truth, render_seconds=render_seconds, codec=used_codec)
 
 
 def _describe(trajectory: Trajectory) -> dict:
