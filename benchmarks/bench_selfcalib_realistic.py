@@ -148,6 +148,7 @@ def main() -> None:
     ap.add_argument("--rolling-shutter", choices=["none", "truth"], default="none",
                     help="truth: pass each render's line delay as --line-delay (what `rscalib linedelay` measures); "
                          "none: the user does not know it (a global-shutter model)")
+    ap.add_argument("--styles", default=",".join(STYLES), help="the motion styles to run, comma-separated")
     ap.add_argument("--tag", default="", help="suffix of the runs folder under CACHE (keeps variants apart)")
     ap.add_argument("--feature-level", action="store_true",
                     help="only the filter on true correspondences of the same motions (no images); prints, writes nothing")
@@ -161,7 +162,7 @@ def main() -> None:
         feature_level(range(args.seed0, args.seed0 + args.seeds), args.frames)
         return
     jobs = [(style, size, args.seed0 + k, args.frames, args.cache, args.rolling_shutter, args.tag)
-            for k in range(args.seeds) for size in SIZES for style in STYLES]
+            for k in range(args.seeds) for size in SIZES for style in STYLES if style in args.styles.split(",")]
     started = time.perf_counter()
     rows = []
     with ProcessPoolExecutor(args.workers) as pool:

@@ -120,6 +120,8 @@ void BindBundle(py::module_& m) {
                      "the keyframe whose distance from the first is held; -1: the farthest")
       .def_readwrite("prior_pixel_sigma_px", &BundleOptions::prior_pixel_sigma_px,
                      "the pixel noise a line-delay prior is weighed against, px")
+      .def_readwrite("max_free_iterations", &BundleOptions::max_free_iterations,
+                     "the free solve's iterations at most (0: no cap of its own); then on bounded")
       .def_readwrite("compute_covariance", &BundleOptions::compute_covariance)
       .def_readwrite("verbose", &BundleOptions::verbose, "Ceres' iteration log to stdout");
 

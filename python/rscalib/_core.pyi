@@ -998,6 +998,14 @@ class BundleOptions:
     def linear_solver(self, arg0: str) -> None:
         ...
     @property
+    def max_free_iterations(self) -> int:
+        """
+        the free solve's iterations at most (0: no cap of its own); then on bounded
+        """
+    @max_free_iterations.setter
+    def max_free_iterations(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
     def max_iterations(self) -> int:
         ...
     @max_iterations.setter

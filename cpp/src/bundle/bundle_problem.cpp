@@ -379,6 +379,9 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
     }
     solver_options.linear_solver_ordering = ordering;
     SetStopAndLogging(options, &solver_options);
+    if (!bounded && options.max_free_iterations > 0)
+      solver_options.max_num_iterations =
+          std::min(solver_options.max_num_iterations, options.max_free_iterations);
     if (stop != nullptr) {
       solver_options.callbacks.push_back(stop);
       solver_options.update_state_every_iteration = true;  // the callback reads the points
@@ -571,6 +574,7 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
     const std::vector<bool> start_point_used = point_used;
     TooManyOutOfRange stop;
     int dropped = 0;
+    bool capped = false;
     stop.count = [&] {
       int c = 0;
       for (int j = 0; j < num_points; ++j) c += out_of_range(j) ? 1 : 0;
@@ -582,6 +586,10 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
       if (summary.termination_type == ceres::USER_FAILURE ||
           summary.termination_type == ceres::FAILURE)
         break;
+      if (options.max_free_iterations > 0 && summary.termination_type == ceres::NO_CONVERGENCE) {
+        capped = true;  // on bounded from here, the points clamped into their range
+        break;
+      }
       std::vector<int> out;
       for (int j = 0; j < num_points; ++j)
         if (out_of_range(j)) out.push_back(j);
@@ -604,6 +612,11 @@ BundleResult SolveBundle(const camera::CameraModel& camera, const BundleData& da
     }
     if (solved_free) {
       result.points_out_of_range = dropped;
+    } else if (capped) {
+      result.points_out_of_range = dropped;
+      for (int j = 0; j < num_points; ++j)
+        points(j, 2) = std::clamp(points(j, 2), rho_low, rho_high);
+      result.message = "the free solve reached its iteration cap: on with bounds from there; ";
     } else {  // back to the start, bounded
       globals = start_globals;
       points = start_points;

@@ -84,7 +84,8 @@ class AdjustmentResult:
     scale_keyframe: int
     points_at_bounds: int
     points_out_of_range: int = 0      # dropped for ending outside the inverse-depth bounds (free solve)
-    solved_with_bounds: bool = False  # Ceres' bounds gave the result (too many points left the range)
+    solved_with_bounds: bool = False  # Ceres' bounds gave the result (too many points left the range, or the
+    #                                   free solve reached max_free_iterations)
 
     @property
     def camera_params(self) -> np.ndarray:
@@ -139,14 +140,16 @@ def adjust(tracks: KeyframeTracks, camera: _core.CameraModel, *,
            line_delay_s: Optional[float] = None, estimate_line_delay: bool = False,
            line_delay_prior: Optional[tuple[float, float]] = None, reference_row: Optional[float] = None,
            loss: str = "soft_l1", loss_scale_px: float = 2.0, max_iterations: int = 200,
-           num_threads: int = 2, options: Optional[_core.BundleOptions] = None) -> AdjustmentResult:
+           num_threads: int = 2, max_free_iterations: Optional[int] = None,
+           options: Optional[_core.BundleOptions] = None) -> AdjustmentResult:
     """Adjust ``camera`` (its model's parameters; ``free_params``: a mask or names, None: all),
     the line delay (held at ``line_delay_s`` (None: 0, a global shutter), estimated from it with
     ``estimate_line_delay``, or with a Gaussian prior ``(mean_s, sigma_s)``), the keyframe poses and
     the points to the tracks.
     ``reference_row``: the row the shutter's shift is counted from (None: the middle row,
     (height - 1) / 2). ``options`` (a ``_core.BundleOptions``) overrides loss, loss_scale_px,
-    max_iterations and num_threads. Raises InputError with the reason on bad input."""
+    max_iterations and num_threads. ``max_free_iterations``: the points free that long at most (None: no
+    cap), then held in their range (docs/sog.md §25). Raises InputError with the reason on bad input."""
     names = list(camera.param_names)
     if free_params is not None and len(free_params) and isinstance(free_params[0], str):
         unknown = sorted(set(free_params) - set(names))
@@ -157,6 +160,7 @@ def adjust(tracks: KeyframeTracks, camera: _core.CameraModel, *,
         options = _core.BundleOptions()
         options.robust_loss, options.robust_loss_scale_px = loss, float(loss_scale_px)
         options.max_iterations, options.num_threads = int(max_iterations), int(num_threads)
+        options.max_free_iterations = 0 if max_free_iterations is None else int(max_free_iterations)
     poses = np.asarray(tracks.keyframe_poses, float)
     uv = np.asarray(tracks.uv_px, float)
     keyframe, point = np.asarray(tracks.keyframe), np.asarray(tracks.point)

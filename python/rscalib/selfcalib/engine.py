@@ -248,7 +248,8 @@ def _adjust(tracks: TrackSet, states: list, camera0: CameraModel, options: SelfC
         poses = FilterPoses.from_states(states)
         # one thread a solve: Ceres' threads sum the Schur complement in an order that changes from run to
         # run (the last bits of f differed between two runs); the halves run side by side instead
-        solve = dict(loss="soft_l1", loss_scale_px=options.robust_loss_scale_px, num_threads=1, **line_delay)
+        solve = dict(loss="soft_l1", loss_scale_px=options.robust_loss_scale_px, num_threads=1,
+                     max_free_iterations=options.max_free_iterations, **line_delay)
         # First the tracks seen longest alone (a tenth of the cost an iteration): from the filter's
         # camera and poses, which can be far off, most iterations are spent here; the whole set then
         # starts from their answer and converges in a few.

@@ -217,6 +217,9 @@ class SelfCalibOptions:
     max_keyframes: int = 100                    # the adjustment's keyframes at most (evenly thinned): the
     #                                             reduced camera matrix is dense; 212 -> 100 on 30 s at 640x480
     #                                             took the solve 4x faster, f within 0.1 sigma (docs/sog.md §23)
+    max_free_iterations: int = 80               # the adjustment's points free this long at most, then held in their
+    #                                             range: far points crawled free (378 iterations, 78 s on a 30 s
+    #                                             look-around; 134 iterations, 38 s with this: docs/sog.md §25)
 
     def __post_init__(self) -> None:
         # types first (text, bools, lists): the range checks below then read numbers
@@ -230,6 +233,7 @@ class SelfCalibOptions:
         for name in ("sprt_alpha", "sprt_beta", "robust_loss_scale_px"):
             checks.number(getattr(self, name), name)
         checks.whole(self.ransac_hypotheses, "ransac_hypotheses", 0, 100_000)   # 0: no 1-point RANSAC
+        checks.whole(self.max_free_iterations, "max_free_iterations", 0, 100_000)   # 0: no cap
         if not isinstance(self.restarts, bool):
             raise InputError(f"restarts must be True or False, not {self.restarts!r}")
         if self.f_range_px is not None:

@@ -230,6 +230,22 @@ def test_a_line_delay_prior_and_held_parameters(rolling_walk):
     assert held.covariance_model[1, 1] == 0.0 and held.covariance_model[0, 0] > 0.0
 
 
+
+def test_a_capped_free_solve_goes_on_bounded_to_the_same_answer(rolling_walk):
+    """The points free for 2 iterations only (docs/sog.md §25), then held in their range from where
+    they are: the same camera and line delay as the uncapped free solve, to 0.1 of their sigma, the
+    camera's truth inside its bounds, and the result says how it was solved."""
+    tracks = _keyframe_tracks(_feature_tracks(rolling_walk, seed=6))
+    free = adjust(tracks, _camera(START), estimate_line_delay=True)
+    assert free.converged and not free.solved_with_bounds and free.iterations > 2
+    capped = adjust(tracks, _camera(START), estimate_line_delay=True, max_free_iterations=2)
+    assert capped.converged, capped.message
+    assert capped.solved_with_bounds and "iteration cap" in capped.message
+    sigma = np.sqrt(np.diag(free.covariance_model))[:6]
+    np.testing.assert_array_less(np.abs(capped.estimate - free.estimate), 0.1 * sigma)
+    # the camera's truth inside (d from noisy velocities is biased low here, capped or not: see above)
+    assert _inside(capped.bounds_99_two_way[:5], PAPER_CAMERA.params).all(), (capped.estimate, capped.bounds_99_two_way)
+
 def test_anchored_points_put_each_point_in_its_first_keyframe():
     poses = np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 0.0], [-0.5, 0.0, 0.0, 0.0, 0.2, 0.0]])
     points_w = np.array([[0.2, 0.1, 2.0], [0.0, 0.0, -3.0], [1.0, -0.5, 4.0]])

@@ -69,6 +69,10 @@ struct BundleOptions {
   // the start with Ceres' bounds (docs/sog.md §23). false: Ceres' bounds from the start.
   bool free_points_first = true;
   double max_out_of_range_share = 0.01;
+  // The free solve's iterations at most (0: no cap of its own); a free solve that has not
+  // converged by then goes on bounded from where it is (far points crawl along their valley
+  // while free: docs/sog.md §25).
+  int max_free_iterations = 0;
   double prior_pixel_sigma_px = 0.5;  // the pixel noise a line-delay prior is weighed against
   bool compute_covariance = true;
   bool verbose = false;  // Ceres' per-iteration log to stderr
@@ -95,7 +99,8 @@ struct BundleResult {
   int points_beyond_infinity = 0;  // rho < 0 at the end (far points' noise)
   int points_at_bounds = 0;     // rho at a bound (BundleOptions::near_limit, beyond_infinity_limit)
   int points_out_of_range = 0;  // ended outside the bounds in the free solve: dropped
-  bool solved_with_bounds = false;  // Ceres' bounds gave the result (too many left the range)
+  bool solved_with_bounds = false;  // Ceres' bounds gave the result (too many left the range,
+                                    // or the free solve reached max_free_iterations)
   // Ceres' summary.
   std::string termination;  // CONVERGENCE | NO_CONVERGENCE | FAILURE | ...
   bool converged = false;
