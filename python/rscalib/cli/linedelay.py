@@ -219,8 +219,12 @@ def _check_files(args) -> None:
 
 
 def run_linedelay(args) -> int:
+    from ..io.limits import keep_freed_memory
     from ..linedelay.pipeline import calibrate_video
 
+    # this process is ours: its solves reuse freed memory instead of page-faulting it in again (the
+    # 60 s speed video 6 % faster; self-calibration gains nothing and would keep 120 MB more: not there)
+    keep_freed_memory()
     options = line_delay_options(args)
     _check_files(args)
     _check_out(args)

@@ -32,10 +32,14 @@ from .options import DetectOptions
 from .result import DetectionResult
 from .tracking import RunDetector, detect_run, run_length
 
+# on_frames(start, times_s, point_ids, uvs) of detect_video
+FramesCallback = Callable[[int, list, list, list], None]
+
 
 def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, Path],
                  options: Optional[DetectOptions] = None, *, progress: ProgressArg = True,
-                 alongside: Optional[Callable[[], None]] = None) -> DetectionResult:
+                 alongside: Optional[Callable[[], None]] = None,
+                 on_frames: Optional[FramesCallback] = None) -> DetectionResult:
     """Detect `target` in every frame of a video, an image folder (file-name order, optional
     timestamps.txt) or a list of image files.
 
@@ -54,9 +58,15 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
     alongside: called once in this process while the workers start (their start-up, ~0.3 s of imports
     each, runs on the other cores meanwhile): before the first frame is detected, or, when the workers
     decode their own segments, once the first segments are handed to them; an exception it raises
-    stops the workers and is raised here (e.g. the line-delay job's check of the target file)."""
+    stops the workers and is raised here (e.g. the line-delay job's check of the target file).
+    on_frames(start, times_s, point_ids, uvs): called in this process as accepted detections arrive, in
+    frame order, while the workers detect the next ones: frames start, start + 1, ... of the accepted
+    frames (their times, and a point-id and a uv array each). A start below the frames already given
+    means detection began again (a segment that could not be verified): those after it are replaced.
+    Not called for a cached result (e.g. the line-delay job's per-frame poses, computed meanwhile)."""
     checks.source(source, "source")
     checks.optional_callable(alongside, "alongside")
+    checks.optional_callable(on_frames, "on_frames")
     checks.instance(target, "target", (str, os.PathLike, Target), "a target file or an rscalib.Target")
     options = DetectOptions() if options is None else options
     checks.instance(options, "options", (DetectOptions,), "an rscalib.DetectOptions or None")
@@ -80,10 +90,10 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
             cached.detect_time_s = time.perf_counter() - started
             return cached
     try:
-        result = _detect_frames(frames, target, options, workers, progress, alongside)
+        result = _detect_frames(frames, target, options, workers, progress, alongside, on_frames)
     except BrokenProcessPool:
         # e.g. a worker killed for memory, or a __main__ that spawn cannot re-import
-        result = _detect_frames(open_source(source), target, options, 1, progress)
+        result = _detect_frames(open_source(source), target, options, 1, progress, on_frames=on_frames)
         result.warnings.append("detection workers failed; detected in one process instead")
     result.detect_time_s = time.perf_counter() - started
     if cache_file is not None:
@@ -180,11 +190,18 @@ def _worker_detect_segment(path: str, fps: Optional[float], start: int, stop: Op
 class _Collected:
     """Accepted detections and drop counts, in frame order, and the DetectionResult they make."""
 
-    def __init__(self):
+    def __init__(self, on_frames: Optional[FramesCallback] = None):
         self.dropped = {reason: 0 for reason in DROP_REASONS}
         self.times, self.numbers, self.labels, self.blur, self.ids, self.uvs = [], [], [], [], [], []
         self.total = 0
         self.size = None
+        self.on_frames, self.given = on_frames, 0
+
+    def hand_on(self) -> None:
+        """The accepted frames not yet given to on_frames, given."""
+        if self.on_frames is not None and len(self.ids) > self.given:
+            start, self.given = self.given, len(self.ids)
+            self.on_frames(start, self.times[start:], self.ids[start:], self.uvs[start:])
 
     def record(self, info: tuple, detection: Union[FrameDetection, str]) -> None:
         """A frame's detection, or the reason it was dropped before detection."""
@@ -220,13 +237,14 @@ class _Collected:
 
 
 def _detect_segments(frames: FrameSource, plan: list, pool, run_frames: int, workers: int,
-                     bar, alongside: Optional[Callable[[], None]] = None) -> Optional[_Collected]:
+                     bar, alongside: Optional[Callable[[], None]] = None,
+                     on_frames: Optional[FramesCallback] = None) -> Optional[_Collected]:
     """Detection by workers that decode their own segments (plan). None when a segment cannot be
     verified to start where it claims, or the container has no frame times (the caller then
     decodes here): the result is then exactly that of one sequential pass. alongside runs here once
     the first segments are submitted: the workers start on them at once instead of after it
     (0.3 s of the 60 s speed video, docs/benchmarks.md)."""
-    collected = _Collected()
+    collected = _Collected(on_frames)
     pending: deque = deque()
     tasks = iter(plan)
     # FFmpeg's threads: the cores the workers leave (one each when they fill the machine: FFmpeg's frame
@@ -260,6 +278,7 @@ def _detect_segments(frames: FrameSource, plan: list, pool, run_frames: int, wor
         last_time_s = segment["last_time_s"] if segment["last_time_s"] is not None else last_time_s
         previous = segment
         bar.update(collected.total)
+        collected.hand_on()  # the workers detect on meanwhile
     if collected.total == 0:
         return None  # e.g. nothing decodable: the sequential pass reports it
     frames.note_non_increasing(non_increasing)
@@ -297,7 +316,8 @@ def _worker_ready() -> None:
 
 
 def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, workers: Optional[int],
-                   progress: bool, alongside: Optional[Callable[[], None]] = None) -> DetectionResult:
+                   progress: bool, alongside: Optional[Callable[[], None]] = None,
+                   on_frames: Optional[FramesCallback] = None) -> DetectionResult:
     estimate = frames.frame_count_estimate
     if workers is None:
         # starting a worker costs ~0.5 s, a frame 5-60 ms: short inputs are faster in-process
@@ -325,9 +345,9 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
             alongside()
         with Progress(progress, estimate, f"detecting {target.target_type}") as bar:
             collected = _detect_segments(frames, plan, pool, run_frames, workers, bar,
-                                         alongside) if plan else None
+                                         alongside, on_frames) if plan else None
             if collected is None:
-                collected = _decode_here(frames, pool, detector, run_frames, workers, bar)
+                collected = _decode_here(frames, pool, detector, run_frames, workers, bar, on_frames)
     except BaseException:
         if pool is not None:  # interrupted (Ctrl-C, SIGTERM) or failed: stop the workers now, not after their frames
             stop_workers(pool)
@@ -341,10 +361,10 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
 
 
 def _decode_here(frames: FrameSource, pool, detector: Optional[RunDetector], run_frames: int, workers: int,
-                 bar) -> _Collected:
+                 bar, on_frames: Optional[FramesCallback] = None) -> _Collected:
     """Decoding in this process (in a thread when there are workers), frames streamed to the
     workers in runs through a bounded queue."""
-    collected = _Collected()
+    collected = _Collected(on_frames)
     pending: deque = deque()
     run: list = []
     max_pending = 2 * workers if run_frames == 1 else workers + 1  # runs in flight: bounded memory
@@ -359,6 +379,7 @@ def _decode_here(frames: FrameSource, pool, detector: Optional[RunDetector], run
         infos, future = item
         for info, detection in zip(infos, future.result()):
             collected.record(info, detection)
+        collected.hand_on()
 
     decoded = frames.frames(gray=True)
     if pool is not None:  # decode while the workers detect; in-process, one frame at a time
@@ -389,6 +410,7 @@ def _decode_here(frames: FrameSource, pool, detector: Optional[RunDetector], run
     while pending:
         record_run(pending.popleft())
     bar.update(collected.total)
+    collected.hand_on()
     return collected
 
 

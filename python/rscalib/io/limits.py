@@ -11,10 +11,14 @@
   (no pixel is decoded), so a 30000x30000 PNG is refused before it is read;
   :func:`check_source_memory` and :func:`bounded_workers` apply the checks above to it (the calls
   to make before decoding a source: self-calibration, intrinsics, detection).
+- :func:`keep_freed_memory`: in a process of our own (`rscalib linedelay`), freed
+  memory kept for reuse instead of handed back to the system at once.
 """
 from __future__ import annotations
 
+import ctypes
 import os
+import sys
 import threading
 from pathlib import Path
 from typing import Optional, Union
@@ -23,7 +27,7 @@ from ..errors import InputError
 
 __all__ = ["FRAME_BYTES_PER_PIXEL", "WORKER_BASE_BYTES", "MEMORY_HEADROOM", "available_memory_bytes", "bounded_workers",
            "check_memory", "check_frame_memory", "check_source_memory", "frame_memory_bytes", "format_bytes", "image_size",
-           "source_frame_size", "usable_cores", "worker_count"]
+           "keep_freed_memory", "source_frame_size", "usable_cores", "worker_count"]
 
 # Peak bytes per pixel of one frame in flight (measured, docs/benchmarks.md): the self-calibration
 # front end on a decoded grey frame peaks at 26-27 B/px (corner search: float eigenvalue and
@@ -38,6 +42,11 @@ WORKER_BASE_BYTES = 100 * 2 ** 20
 MEMORY_HEADROOM = 0.8
 
 _MEMINFO = Path("/proc/meminfo")
+# glibc's mallopt parameters (malloc.h) and what keep_freed_memory sets them to: the largest block
+# glibc lets the heap serve (32 MB), and no trimming of the heap's free top below 1 GB
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_HEAP_BLOCK_MAX_BYTES = 32 * 2 ** 20
+_TRIM_THRESHOLD_BYTES = 2 ** 30
 _CGROUP_FILES = (Path("/sys/fs/cgroup/memory.max"), Path("/sys/fs/cgroup/memory/memory.limit_in_bytes"))
 _CGROUP_USAGE = (Path("/sys/fs/cgroup/memory.current"), Path("/sys/fs/cgroup/memory/memory.usage_in_bytes"))
 
@@ -55,6 +64,22 @@ def _read_int(path: Path) -> Optional[int]:
     except OSError:
         return None
     return int(text) if text.isdigit() else None
+
+
+def keep_freed_memory() -> bool:
+    """Freed memory stays with the process for its next allocation (glibc; elsewhere nothing is done:
+    False). Each Ceres solve allocates its Jacobian afresh (20-40 MB for a minute of video) and glibc
+    would hand it back to the system on every free, so that the next solve page-faults it in again:
+    0.4 s of system time in the 60 s speed video's 8 s (docs/benchmarks.md). Process-wide: only for
+    processes of our own, never on import."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False  # not glibc (e.g. musl has no mallopt)
+    return bool(mallopt(_M_MMAP_THRESHOLD, _HEAP_BLOCK_MAX_BYTES)) and bool(
+        mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD_BYTES))
 
 
 def available_memory_bytes() -> tuple[int, str]:

@@ -48,7 +48,7 @@ from .guidance import capture_guidance
 from .judge import Diagnosis, diagnose, residual_structure
 from .linear import LinearInterpResult, calibrate_line_delay_linear
 from .options import LineDelayOptions, LocalizeOptions
-from .pnp import PnpTrajectory, compare_with_pnp, per_frame_pnp, pnp_trajectory
+from .pnp import FramePoses, PnpTrajectory, PosesAlongside, compare_with_pnp, per_frame_pnp, pnp_trajectory
 from .readout import rotation_hint, time_window, to_top_to_bottom
 from .spline import (
     LineDelayResult,
@@ -202,7 +202,9 @@ def calibrate_video(video: VideoInput, target: Union[None, PathLike, Target] = N
     options = LineDelayOptions() if options is None else options
     _check_arguments(video, target, camera, options, LineDelayOptions, progress, on_detection, on_round)
     camera_model, camera_path = _camera(camera)
-    detection, video_path = _detections(video, target, camera_model, options, progress, on_detection)
+    # the spline's per-frame PnP start, computed while the workers detect (the linear baseline has none)
+    poses = PosesAlongside(camera_model) if options.baseline is None and options.self_check else None
+    detection, video_path = _detections(video, target, camera_model, options, progress, on_detection, poses)
     notes = list(detection.warnings)
     observations = time_window(detection.observations, options.start_s, options.end_s)
     readout = options.readout
@@ -221,7 +223,9 @@ def calibrate_video(video: VideoInput, target: Union[None, PathLike, Target] = N
     if options.baseline == "linear":
         result = calibrate_line_delay_linear(observations, solve_camera, options)
     else:
-        result = _solve_with_self_check(observations, solve_camera, options, on_round)
+        # poses of the frames as detected: those of the top-to-bottom problem only when it is the video's own
+        result = _solve_with_self_check(observations, solve_camera, options, on_round,
+                                        poses.poses_of(observations) if poses and readout == TOP_TO_BOTTOM else None)
         if options.refine_intrinsics:
             camera_model = result.camera  # the camera files carry the refined intrinsics
     result.warnings[:0] = notes
@@ -309,16 +313,18 @@ def _frame_rate_or_none(result) -> Optional[float]:
 
 
 def _solve_with_self_check(observations: Observations, camera: CameraModel, options: LineDelayOptions,
-                           on_round: RoundCallback) -> LineDelayResult:
-    """The spline over the whole video, started from its two halves solved apart (the self-check)."""
+                           on_round: RoundCallback, poses: Optional[FramePoses] = None) -> LineDelayResult:
+    """The spline over the whole video, started from its two halves solved apart (the self-check);
+    poses: the frames' per-frame PnP when already computed (PosesAlongside)."""
     # One PnP pass seeds both halves and the whole video (each frame's pose is its own: the halves'
     # are the same). The self-check's halves are solved first, side by side in two threads (the
     # solver releases the GIL), each from its own PnP start: independent estimates. The whole video
     # then starts from their trajectories, knots and d, and adapts on from there (a round or two
     # instead of five: docs/formulation.md §9). Bad input is left to calibrate_line_delay, whose
     # checks say what is wrong.
-    poses = None
-    if options.self_check and observations.num_frames >= 4 and _fits_in_memory(observations.num_observations):
+    if not (options.self_check and observations.num_frames >= 4 and _fits_in_memory(observations.num_observations)):
+        poses = None
+    elif poses is None:
         poses = per_frame_pnp(observations, camera)
     solved_halves = {}
     line_delay0_s = _probe_line_delay(observations, camera, options, poses) if poses is not None else None
@@ -344,17 +350,19 @@ def _solve_with_self_check(observations: Observations, camera: CameraModel, opti
 
 def detect(video: PathLike, target: Union[Target, PathLike], camera: CameraModel,
            options: Union[None, LineDelayOptions, LocalizeOptions] = None, *,
-           progress: ProgressArg = False) -> DetectionResult:
+           progress: ProgressArg = False, poses: Optional[PosesAlongside] = None) -> DetectionResult:
     """The target (a Target or its file) detected in every frame of the video (or image folder),
     with detect_video's cache (options.detection); InputError when it is detected
-    nowhere or the video's size is not the camera's."""
+    nowhere or the video's size is not the camera's. poses: per-frame PnP of the frames detected,
+    computed meanwhile."""
     options = options or LineDelayOptions()
     if not isinstance(target, Target):
         target = load_target(target)
     # the early check of the target file runs while the detection workers start
     early = []
     detection = detect_video(video, target, options.detection, progress=progress,
-                             alongside=lambda: early.append(check_target_early(video, target)))
+                             alongside=lambda: early.append(check_target_early(video, target)),
+                             on_frames=None if poses is None else poses.of_target(target.points_m))
     if not (early and early[0]):
         check_target_matches(video, target, detection)
     if detection.observations.num_observations == 0:
@@ -530,8 +538,10 @@ def _camera(camera: Optional[CameraInput]) -> tuple[CameraModel, Optional[Path]]
 
 
 def _detections(video: VideoInput, target, camera: CameraModel, options, progress,
-                on_detection: DetectionCallback) -> tuple[DetectionResult, Optional[Path]]:
-    """The detections of `video` (detected now, or given) and the video's path (None when given)."""
+                on_detection: DetectionCallback, poses: Optional[PosesAlongside] = None
+                ) -> tuple[DetectionResult, Optional[Path]]:
+    """The detections of `video` (detected now, or given) and the video's path (None when given);
+    poses: filled with their per-frame PnP while detecting."""
     if isinstance(video, Observations):
         video = DetectionResult.from_observations(video)
     if isinstance(video, DetectionResult):
@@ -548,7 +558,7 @@ def _detections(video: VideoInput, target, camera: CameraModel, options, progres
         if not isinstance(target, Target) and not Path(target).is_file():
             raise InputError(f"target file not found: {target}")
         require_frame_times(open_source(video).timestamps_source, video)  # before the slow detection
-        detection = detect(video, target, camera, options, progress=progress)
+        detection = detect(video, target, camera, options, progress=progress, poses=poses)
         require_frame_times(detection.timestamps, video)  # a video without times or frame rate
     if on_detection is not None:
         on_detection(detection)

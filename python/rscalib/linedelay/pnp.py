@@ -96,6 +96,59 @@ def per_frame_pnp(observations: Observations, camera: CameraModel, min_points: i
     return FramePoses(ok, rvecs, tvecs, rms)
 
 
+_POSE_FIELDS = ("ok", "rotation_vector", "translation", "rms_px")
+
+
+class PosesAlongside:
+    """per_frame_pnp of the frames detection hands on while it detects the next ones (detect_video's
+    on_frames): the poses are ready when detection ends (0.6 s after it for a minute of video
+    otherwise). Each frame's pose is its own, so they are those of one per_frame_pnp to the bit."""
+
+    def __init__(self, camera: CameraModel):
+        self.camera = camera
+        self.target_points = np.zeros((0, 3))
+        self.times: list = []
+        self.parts: list[FramePoses] = []   # one per batch, with its frame count in counts
+        self.counts: list[int] = []
+
+    def of_target(self, target_points: np.ndarray) -> PosesAlongside:
+        """These, for frames of a target with these points (metres, the target's frame)."""
+        self.target_points = np.asarray(target_points, dtype=np.float64)
+        return self
+
+    def __call__(self, start: int, times_s: list, point_ids: list, uvs: list) -> None:
+        if not 0 <= start <= len(self.times):
+            raise ValueError(f"frames from {start} handed on after only {len(self.times)}")
+        while sum(self.counts) > start:   # detection began again from `start`: those after it go
+            keep = start - (sum(self.counts) - self.counts[-1])
+            if keep > 0:
+                self.parts[-1] = FramePoses(*(getattr(self.parts[-1], name)[:keep] for name in _POSE_FIELDS))
+                self.counts[-1] = keep
+            else:
+                self.counts.pop(), self.parts.pop()
+        del self.times[start:]
+        counts = [len(ids) for ids in point_ids]
+        batch = Observations(frame_times_s=np.asarray(times_s, dtype=np.float64),
+                             frame_index=np.repeat(np.arange(len(counts)), counts),
+                             point_id=np.concatenate(point_ids), uv=np.concatenate(uvs),
+                             target_points=self.target_points,
+                             image_size=(self.camera.width, self.camera.height))
+        self.parts.append(per_frame_pnp(batch, self.camera, threads=1))   # the workers have the cores
+        self.counts.append(len(counts))
+        self.times.extend(times_s)
+
+    def poses_of(self, observations: Observations) -> Optional[FramePoses]:
+        """The poses of observations' frames (all handed on, or a time window of them), None when they
+        are not among those handed on."""
+        if not self.parts:
+            return None
+        joined = FramePoses(*(np.concatenate([getattr(p, name) for p in self.parts]) for name in _POSE_FIELDS))
+        try:
+            return joined.of_frames(np.asarray(self.times, dtype=np.float64), observations.frame_times_s)
+        except ValueError:
+            return None
+
+
 @dataclass
 class PnpTrajectory:
     """Per-frame GS PnP poses as a trajectory (`rscalib localize --model gs-pnp`): each pose is stamped

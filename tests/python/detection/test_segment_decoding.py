@@ -147,11 +147,52 @@ def test_a_seek_that_lands_elsewhere_is_not_used(mpeg4, monkeypatch):
     assert by_segments(video, monkeypatch) is None
     # detect_video then decodes in this process and gives the one-pass result
     monkeypatch.setattr(pipeline, "_start_pool", lambda workers, target, options: _Pool())
-    result = detect_video(video, BOARD, replace(OPTIONS, workers=2, cache=False), progress=False)
+    handed = HandedOn()
+    result = detect_video(video, BOARD, replace(OPTIONS, workers=2, cache=False), progress=False, on_frames=handed)
     reference = detect_video(video, BOARD, replace(OPTIONS, workers=1, cache=False), progress=False)
+    # the first segment's frames were handed on before the second failed its check: given again from 0
+    assert handed.starts[0] == 0 and handed.starts.count(0) == 2
+    handed.assert_is(reference)
     np.testing.assert_array_equal(result.observations.uv, reference.observations.uv)
     np.testing.assert_array_equal(result.frame_numbers, reference.frame_numbers)
     assert result.dropped == reference.dropped
+
+
+class HandedOn:
+    """detect_video's on_frames, kept as its contract says: frames from `start` replace those after it."""
+
+    def __init__(self):
+        self.times, self.ids, self.uvs, self.starts = [], [], [], []
+
+    def __call__(self, start, times, ids, uvs):
+        assert 0 <= start <= len(self.times) and len(times) == len(ids) == len(uvs) > 0
+        self.starts.append(start)
+        del self.times[start:], self.ids[start:], self.uvs[start:]
+        self.times += times
+        self.ids += ids
+        self.uvs += uvs
+
+    def assert_is(self, result):
+        observations = result.observations
+        np.testing.assert_array_equal(self.times, observations.frame_times_s)
+        assert len(self.ids) == observations.num_frames
+        for rows, ids, uv in zip(observations.frame_slices(), self.ids, self.uvs):
+            np.testing.assert_array_equal(ids, observations.point_id[rows])
+            np.testing.assert_array_equal(uv, observations.uv[rows])
+
+
+def test_on_frames_hands_on_the_accepted_frames_as_they_arrive(video):
+    """With workers decoding their own segments, each segment's accepted frames are handed on when it
+    arrives (the line-delay job's PnP runs meanwhile); in one process, all at the end. Either way they
+    are the result's frames, in order."""
+    segments = HandedOn()
+    result = detect_video(video, BOARD, replace(OPTIONS, workers=2, cache=False), progress=False, on_frames=segments)
+    segments.assert_is(result)
+    assert len(segments.starts) > 2 and segments.starts == sorted(set(segments.starts))
+    here = HandedOn()
+    detect_video(video, BOARD, replace(OPTIONS, workers=1, cache=False), progress=False, on_frames=here)
+    here.assert_is(result)
+    assert here.starts == [0]
 
 
 class _Pool(InProcessPool):

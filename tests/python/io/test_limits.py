@@ -3,6 +3,8 @@ worker counts bounded by cores and memory (issue 14). Oracles: /proc/meminfo rea
 PNG headers written by hand (a 100000 x 100000 image whose pixels do not exist: only a reader
 that never decodes can report its size), and the arithmetic of the documented constants."""
 import struct
+import subprocess
+import sys
 import zlib
 from pathlib import Path
 
@@ -107,3 +109,40 @@ def test_a_line_delay_solve_too_big_for_memory_is_refused_with_the_numbers(monke
     too_many = int(8 * 2**30 / SOLVE_BYTES_PER_OBSERVATION) + 1
     with pytest.raises(InputError, match=f"{too_many:,} observed corners.*--start/--end"):
         check_solve_memory(too_many)
+
+
+_FREED_KEPT = """
+import ctypes, sys
+from rscalib.io.limits import keep_freed_memory
+if sys.argv[1] == "keep":
+    assert keep_freed_memory()
+libc = ctypes.CDLL(None)
+libc.malloc.restype = ctypes.c_void_p
+libc.free.argtypes = [ctypes.c_void_p]
+class Info(ctypes.Structure):   # glibc's struct mallinfo2: 10 size_t fields, fordblks the 8th (free heap bytes)
+    _fields_ = [(name, ctypes.c_size_t) for name in
+                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+                 "keepcost")]
+libc.mallinfo2.restype = Info
+block = libc.malloc(20 * 2 ** 20)   # a Ceres Jacobian of a minute of video's half
+ctypes.memset(block, 1, 20 * 2 ** 20)
+libc.free(block)
+print(libc.mallinfo2().fordblks)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc")
+def test_keep_freed_memory_keeps_a_freed_solver_block_for_the_next_and_the_cli_asks_for_it(monkeypatch, tmp_path):
+    """glibc's own accounting (mallinfo2): after keep_freed_memory a freed 20 MB block stays in the heap
+    as free memory for the next solve; without it, it goes back to the system (an mmap of its own).
+    `rscalib linedelay` asks for it in its process (before it checks its input)."""
+    free_bytes = {}
+    for mode in ("keep", "default"):
+        run = subprocess.run([sys.executable, "-c", _FREED_KEPT, mode], capture_output=True, text=True, check=True)
+        free_bytes[mode] = int(run.stdout.split()[-1])
+    assert free_bytes["keep"] >= 20 * 2 ** 20 > 10 * free_bytes["default"]
+    calls = []
+    monkeypatch.setattr(limits, "keep_freed_memory", lambda: calls.append(1) or True)
+    from rscalib.cli import main
+    assert main(["linedelay", "missing.mp4", "--target", "t.yaml", "--camera", "c.yaml", "--out",
+                 str(tmp_path / "out")]) == 2 and calls == [1]

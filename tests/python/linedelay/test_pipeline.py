@@ -10,7 +10,7 @@ from rscalib.errors import InputError
 from rscalib.io.cameras import load_camera, write_opencv_yaml
 from rscalib.linedelay import pipeline
 from rscalib.linedelay.options import LineDelayOptions, LocalizeOptions
-from rscalib.linedelay.pnp import PnpTrajectory
+from rscalib.linedelay.pnp import PnpTrajectory, PosesAlongside, per_frame_pnp
 from rscalib.linedelay.spline import calibrate_line_delay
 
 D_S = 40e-6
@@ -89,6 +89,36 @@ def test_the_whole_video_starting_from_its_halves_agrees_with_the_pnp_start(vide
     seeded = pipeline.calibrate_video(*files(video), cached(tmp_path))
     assert abs(seeded.result.line_delay_s - from_pnp.line_delay_s) < 0.3 * from_pnp.line_delay_std_s
     assert seeded.result.solver_line_delay_std_s == pytest.approx(from_pnp.solver_line_delay_std_s, rel=0.1)
+
+
+def test_the_poses_computed_while_detecting_are_one_pnp_pass_to_the_bit(video, tmp_path):
+    """PosesAlongside (the per-frame PnP computed as detection hands frames on) gives per_frame_pnp's
+    poses to the bit, in batches, after detection starts again from an earlier frame, and for a time
+    window; frames it was not given: None. calibrate_video uses it (its d is the direct solve's:
+    test_calibrate_video_is_detect_then_the_engine)."""
+    camera = load_camera(video / "camera.yaml").camera
+    observations = pipeline.detect(*files(video)[:2], camera, cached(tmp_path)).observations
+    rows = observations.frame_slices()
+    times = list(observations.frame_times_s)
+    alongside = PosesAlongside(camera).of_target(observations.target_points)
+
+    def hand_on(start, stop):
+        alongside(start, times[start:stop], [observations.point_id[r] for r in rows[start:stop]],
+                  [observations.uv[r] for r in rows[start:stop]])
+
+    count = observations.num_frames
+    for start, stop in ((0, 10), (10, 25), (5, 30), (30, count)):   # (5, 30): detection began again at 5
+        hand_on(start, stop)
+    direct = per_frame_pnp(observations, camera)
+    got = alongside.poses_of(observations)
+    for name in ("ok", "rotation_vector", "translation", "rms_px"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(direct, name))
+    assert got.ok.sum() > 0.9 * count
+    window = observations.subset_frames(np.arange(count) >= 20)
+    np.testing.assert_array_equal(alongside.poses_of(window).translation, direct.translation[20:])
+    partial = PosesAlongside(camera).of_target(observations.target_points)
+    partial(0, times[:10], [observations.point_id[r] for r in rows[:10]], [observations.uv[r] for r in rows[:10]])
+    assert partial.poses_of(observations) is None and PosesAlongside(camera).poses_of(observations) is None
 
 
 def test_linear_writes_a_report_through_the_same_writers(video, tmp_path):
