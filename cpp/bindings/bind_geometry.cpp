@@ -41,9 +41,8 @@ void BindGeometry(py::module_& m) {
         return geometry::UnwrapRotationVectors(rotation_vectors);
       },
       py::arg("rotation_vectors"),
-      "Paper eq. 22: make a (n, 3) sequence of rotation vectors continuous (2*pi per axis); NaN "
-      "rows "
-      "(unknown rotations) stay NaN.");
+      "Paper eq. 22: make a (n, 3) sequence of rotation vectors continuous (2*pi per axis); "
+      "NaN rows (unknown rotations) stay NaN.");
   m.def(
       "rotation_vector_to_matrix",
       [](const Eigen::Vector3d& phi) {
@@ -124,10 +123,9 @@ void BindGeometry(py::module_& m) {
         return geometry::EdgeWidthFromProfiles(profiles, half_px, min_contrast);
       },
       py::arg("profiles"), py::arg("half_px"), py::arg("min_contrast"),
-      "The 75th percentile of the edge widths (px) of sampled profiles (m, samples; grey levels) "
-      "of "
-      "half lengths half_px; NaN if no profile has more than min_contrast grey levels of "
-      "contrast.");
+      "The 75th percentile of the edge widths (px) of sampled profiles (m, samples; grey "
+      "levels) of half lengths half_px; NaN if no profile has more than min_contrast grey "
+      "levels of contrast.");
   m.def(
       "local_homography_residual",
       [](const Eigen::MatrixX2d& target_xy, const Eigen::MatrixX2d& uv,
@@ -137,9 +135,8 @@ void BindGeometry(py::module_& m) {
       },
       py::arg("target_xy"), py::arg("uv"), py::arg("nearest"),
       "For each point (rows of target_xy and uv, (n, 2)), the distance in grid steps from its "
-      "pixel "
-      "to the homography of its k nearest target neighbours (nearest, (n, k) row indices), fitted "
-      "by the normalised DLT; NaN where it cannot be fitted.");
+      "pixel to the homography of its k nearest target neighbours (nearest, (n, k) row "
+      "indices), fitted by the normalised DLT; NaN where it cannot be fitted.");
 }
 
 }  // namespace rscalib::python
