@@ -400,76 +400,99 @@ def _charuco_board(spec: dict):
 
 
 def _draw(target: Target, ppm: float, margin_m: float) -> tuple[np.ndarray, np.ndarray]:
-    s = target.spec
     if target.target_type == "charuco":
-        # OpenCV draws the board (on its own pixel grid, so whole-pixel squares); corner 0 is one
-        # square in from the board's outer corner.
-        sx, sy, square = s["squaresX"], s["squaresY"], s["squareLength"]
-        square_px = max(4, int(round(square * ppm)))
-        margin = int(round(margin_m * ppm))
-        image = target.charuco_board().generateImage((sx * square_px + 2 * margin, sy * square_px + 2 * margin),
-                                                     marginSize=margin)
-        scale = square_px / square
-        h = np.array([[scale, 0, margin + square_px - 0.5], [0, scale, margin + square_px - 0.5], [0, 0, 1.0]])
-        return image, h
+        return _draw_charuco(target, ppm, margin_m)
     if target.target_type == "circlegrid":
-        pts = target.points_m[:, :2]
-        pad = s["spacingMeters"] + margin_m
-        lo, hi = pts.min(0) - pad, pts.max(0) + pad
-        width, height = np.ceil((hi - lo) * ppm).astype(int)
-        # pixel (i, j) is centred on (i, j) (docs/conventions.md)
-        h = np.array([[ppm, 0, -lo[0] * ppm - 0.5], [0, ppm, -lo[1] * ppm - 0.5], [0, 0, 1.0]])
-        image = np.full((height, width), 255, np.uint8)
-        shift = 4  # fixed-point bits: sub-pixel centres
-        radius = int(round(0.3 * s["spacingMeters"] * ppm * (1 << shift)))
-        for x, y in pts @ h[:2, :2].T + h[:2, 2]:
-            cv2.circle(image, (int(round(x * (1 << shift))), int(round(y * (1 << shift)))), radius, 0,
-                       thickness=-1, lineType=cv2.LINE_AA, shift=shift)
-        return image, h
+        return _draw_circlegrid(target, ppm, margin_m)
     # Checkerboards and aprilgrids are grids of axis-aligned cells: render each pixel as the
     # exact area average of the cells it overlaps (no drawing bias at the corners).
-    if target.target_type == "checkerboard":
-        cols, rows = s["targetCols"], s["targetRows"]
-        # squares from one spacing before the first corner to one after the last, plus margins
-        x_edges = (np.arange(cols + 2) - 1.0) * s["colSpacingMeters"]
-        y_edges = (np.arange(rows + 2) - 1.0) * s["rowSpacingMeters"]
-        x_edges = np.r_[x_edges[0] - margin_m, x_edges, x_edges[-1] + margin_m]
-        y_edges = np.r_[y_edges[0] - margin_m, y_edges, y_edges[-1] + margin_m]
-        i, j = np.meshgrid(np.arange(cols + 1), np.arange(rows + 1))
-        cells = np.where((i + j) % 2 == 0, 0.0, 255.0)  # cell (1, 1), inside the first four corners, is black
-        values = np.pad(cells, 1, constant_values=255.0)
-        flip_y = False
-    else:
-        tag_cols, tag_rows = s["tagCols"], s["tagRows"]
-        size, gap = s["tagSize"], s["tagSpacing"] * s["tagSize"]
-        bits = APRILGRID_TAG_CELLS
+    cells = _checkerboard_cells(target, margin_m) if target.target_type == "checkerboard" \
+        else _aprilgrid_cells(target, margin_m)
+    return _rasterise_cells(*cells, ppm)
 
-        def edges(count: int) -> np.ndarray:
-            # cells along an axis: margin, gap, tag 0's bits, gap, tag 1's bits, ..., gap, margin
-            starts = np.arange(count) * (size + gap)
-            inner = (starts[:, None] + np.arange(bits + 1)[None, :] * size / bits).ravel()
-            end = inner[-1]
-            return np.r_[-gap - margin_m, -gap, inner, end + gap, end + gap + margin_m]
 
-        x_edges, y_edges = edges(tag_cols), edges(tag_rows)
+def _draw_charuco(target: Target, ppm: float, margin_m: float) -> tuple[np.ndarray, np.ndarray]:
+    # OpenCV draws the board (on its own pixel grid, so whole-pixel squares); corner 0 is one
+    # square in from the board's outer corner.
+    s = target.spec
+    sx, sy, square = s["squaresX"], s["squaresY"], s["squareLength"]
+    square_px = max(4, int(round(square * ppm)))
+    margin = int(round(margin_m * ppm))
+    image = target.charuco_board().generateImage((sx * square_px + 2 * margin, sy * square_px + 2 * margin),
+                                                 marginSize=margin)
+    scale = square_px / square
+    h = np.array([[scale, 0, margin + square_px - 0.5], [0, scale, margin + square_px - 0.5], [0, 0, 1.0]])
+    return image, h
 
-        def tag_of_cell(count: int) -> np.ndarray:
-            """Tag index of each cell along an axis (-1: margin or gap)."""
-            tag = np.full(count * (bits + 1) + 3, -1)
-            for t in range(count):
-                tag[2 + t * (bits + 1): 2 + t * (bits + 1) + bits] = t
-            return tag
 
-        tag_x, tag_y = tag_of_cell(tag_cols), tag_of_cell(tag_rows)
-        is_gap_x, is_gap_y = tag_x < 0, tag_y < 0
-        is_gap_x[[0, -1]] = is_gap_y[[0, -1]] = False  # margins
-        values = np.full((len(tag_y), len(tag_x)), 255.0)
-        values[np.ix_(is_gap_y, is_gap_x)] = 0.0  # Kalibr's small squares at the tag corners
-        cells = aprilgrid_tag_cells(tag_rows * tag_cols)  # [tag, j along +y, i along +x]
-        for tr in range(tag_rows):
-            for tc in range(tag_cols):
-                values[np.ix_(tag_y == tr, tag_x == tc)] = np.where(cells[tr * tag_cols + tc], 255.0, 0.0)
-        flip_y = True
+def _draw_circlegrid(target: Target, ppm: float, margin_m: float) -> tuple[np.ndarray, np.ndarray]:
+    s = target.spec
+    pts = target.points_m[:, :2]
+    pad = s["spacingMeters"] + margin_m
+    lo, hi = pts.min(0) - pad, pts.max(0) + pad
+    width, height = np.ceil((hi - lo) * ppm).astype(int)
+    # pixel (i, j) is centred on (i, j) (docs/conventions.md)
+    h = np.array([[ppm, 0, -lo[0] * ppm - 0.5], [0, ppm, -lo[1] * ppm - 0.5], [0, 0, 1.0]])
+    image = np.full((height, width), 255, np.uint8)
+    shift = 4  # fixed-point bits: sub-pixel centres
+    radius = int(round(0.3 * s["spacingMeters"] * ppm * (1 << shift)))
+    for x, y in pts @ h[:2, :2].T + h[:2, 2]:
+        cv2.circle(image, (int(round(x * (1 << shift))), int(round(y * (1 << shift)))), radius, 0,
+                   thickness=-1, lineType=cv2.LINE_AA, shift=shift)
+    return image, h
+
+
+def _checkerboard_cells(target: Target, margin_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """The cell edges along x and y (metres), the cells' grey values and whether y points up."""
+    s = target.spec
+    cols, rows = s["targetCols"], s["targetRows"]
+    # squares from one spacing before the first corner to one after the last, plus margins
+    x_edges = (np.arange(cols + 2) - 1.0) * s["colSpacingMeters"]
+    y_edges = (np.arange(rows + 2) - 1.0) * s["rowSpacingMeters"]
+    x_edges = np.r_[x_edges[0] - margin_m, x_edges, x_edges[-1] + margin_m]
+    y_edges = np.r_[y_edges[0] - margin_m, y_edges, y_edges[-1] + margin_m]
+    i, j = np.meshgrid(np.arange(cols + 1), np.arange(rows + 1))
+    cells = np.where((i + j) % 2 == 0, 0.0, 255.0)  # cell (1, 1), inside the first four corners, is black
+    return x_edges, y_edges, np.pad(cells, 1, constant_values=255.0), False
+
+
+def _aprilgrid_cells(target: Target, margin_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """As _checkerboard_cells, for Kalibr's aprilgrid (its y points up)."""
+    s = target.spec
+    tag_cols, tag_rows = s["tagCols"], s["tagRows"]
+    size, gap = s["tagSize"], s["tagSpacing"] * s["tagSize"]
+    bits = APRILGRID_TAG_CELLS
+
+    def edges(count: int) -> np.ndarray:
+        # cells along an axis: margin, gap, tag 0's bits, gap, tag 1's bits, ..., gap, margin
+        starts = np.arange(count) * (size + gap)
+        inner = (starts[:, None] + np.arange(bits + 1)[None, :] * size / bits).ravel()
+        end = inner[-1]
+        return np.r_[-gap - margin_m, -gap, inner, end + gap, end + gap + margin_m]
+
+    def tag_of_cell(count: int) -> np.ndarray:
+        """Tag index of each cell along an axis (-1: margin or gap)."""
+        tag = np.full(count * (bits + 1) + 3, -1)
+        for t in range(count):
+            tag[2 + t * (bits + 1): 2 + t * (bits + 1) + bits] = t
+        return tag
+
+    tag_x, tag_y = tag_of_cell(tag_cols), tag_of_cell(tag_rows)
+    is_gap_x, is_gap_y = tag_x < 0, tag_y < 0
+    is_gap_x[[0, -1]] = is_gap_y[[0, -1]] = False  # margins
+    values = np.full((len(tag_y), len(tag_x)), 255.0)
+    values[np.ix_(is_gap_y, is_gap_x)] = 0.0  # Kalibr's small squares at the tag corners
+    cells = aprilgrid_tag_cells(tag_rows * tag_cols)  # [tag, j along +y, i along +x]
+    for tr in range(tag_rows):
+        for tc in range(tag_cols):
+            values[np.ix_(tag_y == tr, tag_x == tc)] = np.where(cells[tr * tag_cols + tc], 255.0, 0.0)
+    return edges(tag_cols), edges(tag_rows), values, True
+
+
+def _rasterise_cells(x_edges: np.ndarray, y_edges: np.ndarray, values: np.ndarray, flip_y: bool,
+                     ppm: float) -> tuple[np.ndarray, np.ndarray]:
+    """The image of a grid of cells (each pixel the area average of the cells it overlaps) and its
+    board-to-pixel homography."""
     lo = np.array([x_edges[0], y_edges[0]])
     hi = np.array([x_edges[-1], y_edges[-1]])
     width, height = np.ceil((hi - lo) * ppm).astype(int)

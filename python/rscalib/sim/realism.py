@@ -248,6 +248,39 @@ def _uv_lists(frames: list) -> list:
             for uv in frames]
 
 
+_IDENTITY_WARP = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+def _sensor_frames(renderer: RollingShutterRenderer, times: np.ndarray, warps: np.ndarray, rng: np.random.Generator,
+                   options: RealismOptions, vignette: np.ndarray, exposure_s: float, size_wh: tuple,
+                   progress: bool) -> tuple[list, list, list]:
+    """Each frame as the sensor and the stabiliser give it, with the targets' exact projections at
+    the start and the middle of each row's exposure (after the stabilisation warp)."""
+    frames, uv_rs, uv_rs_mid = [], [], []
+    with Progress(progress, len(times), f"rendering {size_wh[0]}x{size_wh[1]} (realistic)") as bar:
+        for i, t in enumerate(times):
+            image = sensor_image(renderer.render(float(t)), rng, options, vignette)
+            uv = renderer.project_rs(float(t))
+            uv_mid = renderer.project_rs(float(t), 0.5 * exposure_s)
+            if not np.allclose(warps[i], _IDENTITY_WARP):
+                image = cv2.warpAffine(image, warps[i], size_wh, flags=cv2.INTER_LINEAR,
+                                       borderMode=cv2.BORDER_REFLECT)
+                uv = uv @ warps[i][:, :2].T + warps[i][:, 2]
+                uv_mid = uv_mid @ warps[i][:, :2].T + warps[i][:, 2]
+            frames.append(image)
+            uv_rs.append(uv)
+            uv_rs_mid.append(uv_mid)
+            bar.advance()
+    return frames, uv_rs, uv_rs_mid
+
+
+def _projections_truth(uv_rs: list, uv_rs_mid: list) -> dict:
+    return {"uv_rs": _uv_lists(uv_rs), "uv_rs_mid_exposure": _uv_lists(uv_rs_mid),
+            "definition": "uv_rs: exact rolling-shutter projection at the capture time (start of the row's "
+                          "exposure), after the stabilisation warp; uv_rs_mid_exposure: at the middle of the "
+                          "exposure (where a blurred corner is found); null = not visible"}
+
+
 def render_realistic_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30.0,
                            size: Union[str, Sequence[int]] = (640, 480), target: Union[str, Path, Target] = "checkerboard",
                            duration_s: float = 8.0, seed: int = 0, motion_style: str = "handheld", *,
@@ -288,23 +321,9 @@ def render_realistic_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30
                                       exposure_s=exposure_s,
                                       exposure_samples=options.exposure_samples if exposure_s > 0 else None,
                                       workers=workers)
-    frames, uv_rs, uv_rs_mid = [], [], []
-    identity = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     try:
-        with Progress(progress, len(times), f"rendering {size_wh[0]}x{size_wh[1]} (realistic)") as bar:
-            for i, t in enumerate(times):
-                image = sensor_image(renderer.render(float(t)), rng, options, vignette)
-                uv = renderer.project_rs(float(t))
-                uv_mid = renderer.project_rs(float(t), 0.5 * exposure_s)
-                if not np.allclose(warps[i], identity):
-                    image = cv2.warpAffine(image, warps[i], size_wh, flags=cv2.INTER_LINEAR,
-                                           borderMode=cv2.BORDER_REFLECT)
-                    uv = uv @ warps[i][:, :2].T + warps[i][:, 2]
-                    uv_mid = uv_mid @ warps[i][:, :2].T + warps[i][:, 2]
-                frames.append(image)
-                uv_rs.append(uv)
-                uv_rs_mid.append(uv_mid)
-                bar.advance()
+        frames, uv_rs, uv_rs_mid = _sensor_frames(renderer, times, warps, rng, options, vignette, exposure_s,
+                                                  size_wh, progress)
     finally:
         renderer.close()
     video_path = out / "video.mp4"
@@ -329,12 +348,9 @@ def render_realistic_video(out_dir, line_delay_s: float = 30e-6, fps: float = 30
         "supersample": int(supersample),
         "capture_times_s": [float(t) for t in times],
         "recorded_times_s": [float(t) for t in recorded],
-        "stabilisation_warps": warps.round(9).tolist() if not np.allclose(warps, identity) else None,
+        "stabilisation_warps": warps.round(9).tolist() if not np.allclose(warps, _IDENTITY_WARP) else None,
         "trajectory": trajectory.describe(),
-        "projections": {"uv_rs": _uv_lists(uv_rs), "uv_rs_mid_exposure": _uv_lists(uv_rs_mid),
-                        "definition": "uv_rs: exact rolling-shutter projection at the capture time (start of the "
-                                      "row's exposure), after the stabilisation warp; uv_rs_mid_exposure: at the "
-                                      "middle of the exposure (where a blurred corner is found); null = not visible"},
+        "projections": _projections_truth(uv_rs, uv_rs_mid),
     }
     truth_path = out / "truth.json"
     truth_path.write_text(json.dumps(truth, separators=(",", ":")))
