@@ -3,9 +3,11 @@
 #include <cmath>
 #include <memory>
 #include <random>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
+#include <ceres/autodiff_cost_function.h>
 #include <ceres/jet.h>
 #include <gtest/gtest.h>
 
@@ -195,6 +197,77 @@ INSTANTIATE_TEST_SUITE_P(Models, ReprojectionCostTest,
                                            CostCase{"pinhole-radtan", false},
                                            CostCase{"pinhole-equidistant", false},
                                            CostCase{"pinhole-equidistant", true}));
+
+// Create's cost from another keyframe chains its Jacobian by hand (ChainedReprojectionCost): the
+// same residual to the bit and the same Jacobians as autodiff of the whole functor, to rounding.
+template <int kNumIntrinsics>
+std::unique_ptr<ceres::CostFunction> WholeAutodiff(const ReprojectionCost& functor) {
+  return std::make_unique<
+      ceres::AutoDiffCostFunction<ReprojectionCost, 2, kNumIntrinsics, 6, 6, 3, 1>>(
+      new ReprojectionCost(functor));
+}
+
+TEST(ReprojectionCost, TheChainedJacobianIsTheWholeFunctorsAutodiff) {
+  for (const std::string model : {"civera-radial", "pinhole-radtan", "pinhole-equidistant"}) {
+    const camera::CameraModel cam = Camera(model);
+    std::mt19937 rng(11);
+    for (int trial = 0; trial < 20; ++trial) {
+      const Vector6d anchor = RandomPose(&rng, 0.1);
+      const Vector6d observer = RandomPose(&rng, 0.05);
+      const Eigen::Vector3d x_w = PointAhead(anchor, &rng);
+      Eigen::Vector3d abr;
+      ASSERT_TRUE(AnchoredPointFromWorld(anchor.data(), x_w, &abr));
+      abr[2] *= (trial % 4 == 0) ? 0.0 : 1.0;  // every fourth point at infinity (rho = 0)
+      const Eigen::Vector2d uv_obs(0.4 * cam.width() + trial, 0.6 * cam.height() - trial);
+      const Eigen::Vector2d velocity(80.0 - 7.0 * trial, 30.0 + 3.0 * trial);
+      double line_delay_us = 20.0 + trial;
+      Eigen::VectorXd intrinsics = cam.params();
+      const double pixel_size[2] = {cam.pixel_size_mm()[0], cam.pixel_size_mm()[1]};
+      const ReprojectionCost functor(cam.type(), pixel_size, uv_obs.data(), velocity.data(),
+                                     cam.height() / 2.0 - 0.5);
+      std::unique_ptr<ceres::CostFunction> chained(ReprojectionCost::Create(
+          cam.type(), pixel_size, uv_obs.data(), velocity.data(), cam.height() / 2.0 - 0.5, false));
+      std::unique_ptr<ceres::CostFunction> whole;
+      switch (intrinsics.size()) {
+        case 5: whole = WholeAutodiff<5>(functor); break;
+        case 8: whole = WholeAutodiff<8>(functor); break;
+        default: whole = WholeAutodiff<9>(functor); break;
+      }
+      Vector6d anchor_block = anchor, observer_block = observer;
+      double* blocks[5] = {intrinsics.data(), anchor_block.data(), observer_block.data(),
+                           abr.data(), &line_delay_us};
+      std::vector<Eigen::Matrix<double, 2, Eigen::Dynamic, Eigen::RowMajor>> j_chained, j_whole;
+      std::vector<double*> p_chained, p_whole;
+      for (int size : whole->parameter_block_sizes()) {
+        j_chained.emplace_back(2, size);
+        j_whole.emplace_back(2, size);
+      }
+      for (size_t b = 0; b < j_whole.size(); ++b) {
+        p_chained.push_back(j_chained[b].data());
+        p_whole.push_back(j_whole[b].data());
+      }
+      Eigen::Vector2d r_chained, r_whole, r_plain, r_whole_plain;
+      ASSERT_TRUE(chained->Evaluate(blocks, r_chained.data(), p_chained.data())) << model;
+      ASSERT_TRUE(whole->Evaluate(blocks, r_whole.data(), p_whole.data())) << model;
+      EXPECT_EQ(r_chained, r_whole) << model;
+      // without Jacobians both evaluate the functor in double
+      ASSERT_TRUE(chained->Evaluate(blocks, r_plain.data(), nullptr));
+      ASSERT_TRUE(whole->Evaluate(blocks, r_whole_plain.data(), nullptr));
+      EXPECT_EQ(r_plain, r_whole_plain) << model;
+      for (size_t b = 0; b < j_whole.size(); ++b) {
+        const double scale = std::max(1.0, j_whole[b].cwiseAbs().maxCoeff());
+        EXPECT_LT((j_chained[b] - j_whole[b]).cwiseAbs().maxCoeff(), 1e-12 * scale)
+            << model << " block " << b << " trial " << trial;
+      }
+      // a block Ceres holds constant gets no Jacobian: the others are still filled
+      double* some[5] = {nullptr, p_chained[1], nullptr, p_chained[3], nullptr};
+      j_chained[1].setZero();
+      ASSERT_TRUE(chained->Evaluate(blocks, r_chained.data(), some));
+      EXPECT_LT((j_chained[1] - j_whole[1]).cwiseAbs().maxCoeff(),
+                1e-12 * std::max(1.0, j_whole[1].cwiseAbs().maxCoeff()));
+    }
+  }
+}
 
 TEST(ReprojectionCost, BehindTheCameraIsNotProjected) {
   const camera::CameraModel cam = Camera("civera-radial");

@@ -22,6 +22,7 @@
 // clamped, non-smooth residual), and SolveBundle drops observations that cannot be projected at
 // the start.
 #include <ceres/autodiff_cost_function.h>
+#include <ceres/sized_cost_function.h>
 
 #include "rscalib/bundle/anchored_point.hpp"
 #include "rscalib/camera/camera_model.hpp"
@@ -66,8 +67,12 @@ struct ReprojectionCost {
     return true;
   }
 
+  // d r_row / d(line delay in µs/row): the residual is linear in it.
+  double shift_px_per_us(int row) const { return shift_px_per_us_[row]; }
+
   // The cost of an observation; in_anchor: observed in the point's anchor keyframe (the blocks
-  // above without the poses).
+  // above without the poses). From another keyframe its Jacobian is chained
+  // (ChainedReprojectionCost), in the anchor it is autodiff of the functor.
   static ceres::CostFunction* Create(camera::CameraModelType model, const double* pixel_size_mm,
                                      const double* uv_px, const double* image_velocity_px_s,
                                      double reference_row, bool in_anchor) {
@@ -84,17 +89,88 @@ struct ReprojectionCost {
 
  private:
   template <int kNumIntrinsics>
-  static ceres::CostFunction* Make(ReprojectionCost* functor, bool in_anchor) {
-    if (in_anchor)
-      return new ceres::AutoDiffCostFunction<ReprojectionCost, 2, kNumIntrinsics, 3, 1>(functor);
-    return new ceres::AutoDiffCostFunction<ReprojectionCost, 2, kNumIntrinsics, 6, 6, 3, 1>(
-        functor);
-  }
+  static ceres::CostFunction* Make(ReprojectionCost* functor, bool in_anchor);
 
   camera::CameraModelType model_;
   double pixel_size_mm_[2];
   double uv_px_[2];
   double shift_px_per_us_[2];  // d(uv)/d(line delay in µs/row)
 };
+
+// ReprojectionCost observed from another keyframe than the anchor, with its Jacobian chained by
+// hand (docs/sog.md §26): r depends on the poses and the point only through h (3), so
+//   dr/d(anchor, observer, point) = dr/dh dh/d(anchor, observer, point),
+// h autodiffed over its 15 parameters and the projection over h and the intrinsics (3 + K): two
+// narrow Jets instead of one 21-27 wide, the same derivatives (to rounding); dr/dd = -shift.
+// Parameter blocks as ReprojectionCost's: intrinsics (K), anchor_pose (6), observer_pose (6),
+// point (3), line_delay (1).
+template <int kNumIntrinsics>
+class ChainedReprojectionCost
+    : public ceres::SizedCostFunction<2, kNumIntrinsics, 6, 6, kAnchoredPointDim, 1> {
+ public:
+  explicit ChainedReprojectionCost(const ReprojectionCost& functor) : functor_(functor) {}
+
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    const double* intrinsics = parameters[0];
+    const double line_delay_us = parameters[4][0];
+    if (jacobians == nullptr) {
+      double h[3];
+      AnchoredPointInCamera(parameters[1], parameters[2], parameters[3], h);
+      return functor_.Residual(intrinsics, h, line_delay_us, residuals);
+    }
+    using GeometryJet = ceres::Jet<double, kGeometryParams>;
+    GeometryJet anchor[6], observer[6], point[kAnchoredPointDim], h[3];
+    for (int i = 0; i < 6; ++i) {
+      anchor[i] = GeometryJet(parameters[1][i], i);
+      observer[i] = GeometryJet(parameters[2][i], 6 + i);
+    }
+    for (int i = 0; i < kAnchoredPointDim; ++i) point[i] = GeometryJet(parameters[3][i], 12 + i);
+    AnchoredPointInCamera(anchor, observer, point, h);
+
+    using ProjectionJet = ceres::Jet<double, 3 + kNumIntrinsics>;
+    ProjectionJet theta[kNumIntrinsics], h_jet[3], r[2];
+    for (int i = 0; i < 3; ++i) h_jet[i] = ProjectionJet(h[i].a, i);
+    for (int k = 0; k < kNumIntrinsics; ++k) theta[k] = ProjectionJet(intrinsics[k], 3 + k);
+    if (!functor_.Residual(theta, h_jet, ProjectionJet(line_delay_us), r)) return false;
+    residuals[0] = r[0].a;
+    residuals[1] = r[1].a;
+
+    if (jacobians[0] != nullptr) {
+      for (int row = 0; row < 2; ++row)
+        for (int k = 0; k < kNumIntrinsics; ++k)
+          jacobians[0][row * kNumIntrinsics + k] = r[row].v[3 + k];
+    }
+    constexpr int kOffset[3] = {0, 6, 12};
+    constexpr int kSize[3] = {6, 6, kAnchoredPointDim};
+    for (int b = 0; b < 3; ++b) {
+      double* d_r_d_block = jacobians[1 + b];
+      if (d_r_d_block == nullptr) continue;
+      for (int row = 0; row < 2; ++row)
+        for (int c = 0; c < kSize[b]; ++c)
+          d_r_d_block[row * kSize[b] + c] = r[row].v[0] * h[0].v[kOffset[b] + c] +
+                                            r[row].v[1] * h[1].v[kOffset[b] + c] +
+                                            r[row].v[2] * h[2].v[kOffset[b] + c];
+    }
+    if (jacobians[4] != nullptr) {
+      jacobians[4][0] = -functor_.shift_px_per_us(0);
+      jacobians[4][1] = -functor_.shift_px_per_us(1);
+    }
+    return true;
+  }
+
+ private:
+  static constexpr int kGeometryParams = 6 + 6 + kAnchoredPointDim;
+  const ReprojectionCost functor_;
+};
+
+template <int kNumIntrinsics>
+ceres::CostFunction* ReprojectionCost::Make(ReprojectionCost* functor, bool in_anchor) {
+  if (in_anchor)
+    return new ceres::AutoDiffCostFunction<ReprojectionCost, 2, kNumIntrinsics, 3, 1>(functor);
+  ceres::CostFunction* chained = new ChainedReprojectionCost<kNumIntrinsics>(*functor);
+  delete functor;
+  return chained;
+}
 
 }  // namespace rscalib::bundle
