@@ -249,3 +249,56 @@ def test_line_delay_prior_refuses_what_it_cannot_use(tmp_path):
     (tmp_path / "bad.json").write_text("{not json")
     with pytest.raises(InputError, match="not a readable"):
         line_delay_prior(tmp_path / "bad.json", HEIGHT)
+
+
+def test_quick_f_starts_are_log_spaced_over_the_range():
+    from rscalib.selfcalib.engine import QUICK_F_STARTS, quick_f_starts
+
+    starts = quick_f_starts((200.0, 1220.0))
+    np.testing.assert_allclose(np.log(np.asarray(starts) / 200.0) / np.log(1220.0 / 200.0), QUICK_F_STARTS)
+
+
+def _fake_adjust(costs: dict, calls: list):
+    """adjust() that answers each start's f with a converged result of the given cost (None: not converged)."""
+    def fake(start, camera, **solve):
+        f = round(float(np.asarray(camera.params)[0]))
+        calls.append(f)
+        cost = costs[f]
+        return SimpleNamespace(converged=cost is not None, final_cost=np.inf if cost is None else cost, f=f)
+    return fake
+
+
+@pytest.mark.parametrize("costs, chosen", [
+    ({300: 143.2, 520: 127.6, 800: 127.6}, 520),   # another start's minimum is lower: it replaces the filter's
+    ({300: 127.6, 520: 126.0, 800: 200.0}, 300),   # within the margin: the filter's start is kept
+    ({300: None, 520: 150.0, 800: 140.0}, 800),    # the filter's start did not converge: the lowest of the rest
+    ({300: None, 520: None, 800: None}, None),     # none converged: no quick answer
+])
+def test_the_quick_stage_keeps_the_lowest_cost_start(monkeypatch, costs, chosen):
+    from rscalib.selfcalib import engine
+
+    calls: list = []
+    monkeypatch.setattr(engine, "adjust", _fake_adjust(costs, calls))
+    monkeypatch.setattr(engine, "adjustment_start", lambda few, poses, camera: None)
+    camera0 = _core.CameraModel("civera-radial", [300.0, 160.0, 120.0, 0.01, 0.0], WIDTH, HEIGHT, [0.01, 0.01])
+    # 320 is within QUICK_DISTINCT_F of the filter's 300: not tried
+    best = engine._quick_stage(None, None, camera0, {}, [320.0, 520.0, 800.0])
+    assert sorted(calls) == [300, 520, 800]
+    assert (best.f if best is not None else None) == chosen
+
+
+def test_only_the_filters_start_may_raise(monkeypatch):
+    from rscalib.selfcalib import engine
+
+    def fake(start, camera, **solve):
+        if float(np.asarray(camera.params)[0]) != 300.0:
+            raise ValueError("too few points in front of the cameras")
+        return SimpleNamespace(converged=True, final_cost=1.0, f=300)
+
+    monkeypatch.setattr(engine, "adjust", fake)
+    monkeypatch.setattr(engine, "adjustment_start", lambda few, poses, camera: None)
+    camera0 = _core.CameraModel("civera-radial", [300.0, 160.0, 120.0, 0.0, 0.0], WIDTH, HEIGHT, [0.01, 0.01])
+    assert engine._quick_stage(None, None, camera0, {}, [600.0]).f == 300
+    monkeypatch.setattr(engine, "adjust", lambda start, camera, **solve: (_ for _ in ()).throw(ValueError("no")))
+    with pytest.raises(ValueError):
+        engine._quick_stage(None, None, camera0, {}, [600.0])
