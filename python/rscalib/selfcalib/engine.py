@@ -35,12 +35,6 @@ from .tracks import FeatureTracker, TrackSet
 MIN_TRACK_KEYFRAMES = 3
 # The quick first adjustment: this many tracks, those seen in most keyframes
 QUICK_TRACKS = 150
-# ... started from the filter's camera and from these focal lengths, spread over the bank's f range (at
-# these fractions of it, log-spaced): a real lens the two-coefficient model only approximates gave the
-# quick stage a second minimum, and the filter's camera sat in the wrong one's basin (docs/sog.md §27)
-QUICK_F_STARTS = (1.0 / 6.0, 0.5, 5.0 / 6.0)
-QUICK_DISTINCT_F = 0.15      # a start within this fraction of the filter's f adds nothing: skipped
-QUICK_SWITCH_MARGIN = 0.02   # another start's answer replaces the filter's only when its cost is this much lower
 # Memory of the bank: every Gaussian holds a dense covariance of the state, 18 + 6 per (inverse-depth)
 # feature, in doubles. Measured peak over G x dim^2 x 8 B: 1.04-1.08 at 108 Gaussians, 50-200
 # features, once 1.38 at 50 (the two update threads' allocations; docs/benchmarks.md, "Peak memory
@@ -236,47 +230,10 @@ def line_delay_prior(path, image_height: int) -> tuple[float, float]:
     return float(mean), float(sigma)
 
 
-def quick_f_starts(f_range: tuple[float, float]) -> list[float]:
-    """The quick stage's focal lengths besides the filter's: QUICK_F_STARTS of the range, log-spaced."""
-    low, high = (float(v) for v in f_range)
-    return [low * (high / low) ** fraction for fraction in QUICK_F_STARTS]
-
-
-def _quick_stage(few, poses, camera0: CameraModel, solve: dict, f_starts: list) -> Optional[AdjustmentResult]:
-    """The quick stage (the tracks seen longest) from the filter's camera and from each focal length of
-    f_starts not within QUICK_DISTINCT_F of its f (the rest of the camera as the filter's), two at a time:
-    the converged answer of the lowest cost, the filter's start's unless another's cost is
-    QUICK_SWITCH_MARGIN lower; None when none converged. Only the filter's start may raise."""
-    params = np.asarray(camera0.params, float)
-    cameras = [camera0]
-    for f in f_starts:
-        if abs(f / params[0] - 1.0) > QUICK_DISTINCT_F:
-            cameras.append(CameraModel("civera-radial", np.r_[f, params[1:]], camera0.width, camera0.height,
-                                       pixel_size_mm=camera0.pixel_size_mm))
-
-    def answer(k: int) -> Optional[AdjustmentResult]:
-        try:
-            return adjust(adjustment_start(few, poses, cameras[k]), cameras[k], **solve)
-        except (ValueError, np.linalg.LinAlgError):
-            if k == 0:
-                raise
-            return None
-
-    with ThreadPoolExecutor(2) as pool:
-        answers = list(pool.map(answer, range(len(cameras))))
-    best = answers[0] if answers[0].converged else None
-    for other in answers[1:]:
-        if other is not None and other.converged and (best is None
-                                                      or other.final_cost < (1.0 - QUICK_SWITCH_MARGIN) * best.final_cost):
-            best = other
-    return best
-
-
-def _adjust(tracks: TrackSet, states: list, camera0: CameraModel, options: SelfCalibOptions, line_delay: dict,
-            f_starts: Optional[list] = None) -> tuple[Optional[AdjustmentResult], str, dict, Optional[dict]]:
+def _adjust(tracks: TrackSet, states: list, camera0: CameraModel, options: SelfCalibOptions, line_delay: dict
+            ) -> tuple[Optional[AdjustmentResult], str, dict, Optional[dict]]:
     """The adjustment over the tracks from the bank's camera and poses: its result (None when it
-    could not run), the reason when not, what went into it, and the self-check of its two halves.
-    f_starts: the quick stage's other focal lengths (quick_f_starts of the bank's range)."""
+    could not run), the reason when not, what went into it, and the self-check of its two halves."""
     # the tracker's counters; its clock as a *_time_s (a time: not compared between runs)
     used: dict = {("tracking_time_s" if k == "wall_s" else k): v for k, v in tracks.stats.items()
                   if isinstance(v, (int, float)) and k != "ms_per_frame_wall"}
@@ -295,11 +252,11 @@ def _adjust(tracks: TrackSet, states: list, camera0: CameraModel, options: SelfC
                      max_free_iterations=options.max_free_iterations, **line_delay)
         # First the tracks seen longest alone (a tenth of the cost an iteration): from the filter's
         # camera and poses, which can be far off, most iterations are spent here; the whole set then
-        # starts from their answer (the lowest cost of several starts) and converges in a few.
+        # starts from their answer and converges in a few.
         few = subset(observations, QUICK_TRACKS, MIN_TRACK_KEYFRAMES)
         if len(np.unique(few.track_id)) < len(np.unique(observations.track_id)):
-            quick = _quick_stage(few, poses, camera0, solve, list(f_starts or []))
-            if quick is not None:
+            quick = adjust(adjustment_start(few, poses, camera0), camera0, **solve)
+            if quick.converged:
                 poses = KeyframePoses(np.asarray(observations.keyframes), np.asarray(quick.keyframe_poses))
                 camera0 = quick.camera
                 if "estimate_line_delay" in solve:
@@ -426,9 +383,7 @@ def calibrate_frames(frames, image_size: tuple[int, int], options: Optional[Self
             if len(tracks.t_s) != len(states):
                 raise InputError("the tracker and the filter saw different frames")   # a bug, said plainly
             camera0 = CameraModel("civera-radial", mean, width, height, pixel_size_mm=_pixel_pair(pixel_size_mm))
-            f_grid = np.asarray(initial.means, float)[:, 0]
-            adjusted = _adjust(tracks, states, camera0, options, line_delay_mode,
-                               quick_f_starts((f_grid.min(), f_grid.max())))
+            adjusted = _adjust(tracks, states, camera0, options, line_delay_mode)
             frame_interval = float(np.median(np.diff(tracks.t_s))) if len(tracks.t_s) > 1 else None
     warnings = _filter_warnings(bank, history, source, bundle=bundle, line_delay_s=line_delay_s)
     filter_bounds = np.asarray(bank.calibration_bounds_99())
