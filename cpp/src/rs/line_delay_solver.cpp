@@ -12,6 +12,7 @@
 #include <ceres/ceres.h>
 
 #include "rscalib/core/error.hpp"
+#include "rscalib/core/parallel_ranges.hpp"
 #include "rscalib/rs/intrinsics_prior_cost.hpp"
 #include "rscalib/rs/motion_prior_cost.hpp"
 #include "rscalib/rs/rs_reprojection_analytic_cost.hpp"
@@ -32,17 +33,17 @@ struct Attachment {
   detail::WeightedError error;
 };
 
-// Span, image velocity and weight of every observation at the current estimate.
-std::vector<Attachment> Attach(const RsObservations& obs, const camera::CameraModel& camera,
-                               const CubicBSpline& trajectory,
-                               const std::vector<SpanPowerBasis>& bases, double line_delay_s,
-                               const RsSolverOptions& options) {
+// Span, image velocity and weight of observations [begin, end) at the current estimate.
+void AttachRange(const RsObservations& obs, const camera::CameraModel& camera,
+                 const CubicBSpline& trajectory, const std::vector<SpanPowerBasis>& bases,
+                 double line_delay_s, const RsSolverOptions& options, Eigen::Index begin,
+                 Eigen::Index end, std::vector<Attachment>* attached) {
   using Jet = ceres::Jet<double, 1>;
   const SpanCamera cam = MakeSpanCamera(camera);
   const auto& control = trajectory.control_points();
   const int n = trajectory.num_control_points();
-  std::vector<Attachment> out(obs.uv.rows());
-  for (Eigen::Index m = 0; m < obs.uv.rows(); ++m) {
+  std::vector<Attachment>& out = *attached;
+  for (Eigen::Index m = begin; m < end; ++m) {
     Attachment& a = out[m];
     detail::WeightedError& e = a.error;
     e.time_s = obs.frame_time_s[m] + obs.uv(m, 1) * line_delay_s;
@@ -65,6 +66,19 @@ std::vector<Attachment> Attach(const RsObservations& obs, const camera::CameraMo
         options.observation_sigma.size() > 0 ? options.observation_sigma[m] : options.pixel_sigma,
         options.max_rs_gain, &e);
   }
+}
+
+// Span, image velocity and weight of every observation at the current estimate. Each
+// observation is on its own: options.num_threads threads share them, the same result.
+std::vector<Attachment> Attach(const RsObservations& obs, const camera::CameraModel& camera,
+                               const CubicBSpline& trajectory,
+                               const std::vector<SpanPowerBasis>& bases, double line_delay_s,
+                               const RsSolverOptions& options) {
+  std::vector<Attachment> out(obs.uv.rows());
+  ParallelRanges(out.size(), options.num_threads, 4096, [&](std::size_t begin, std::size_t end) {
+    AttachRange(obs, camera, trajectory, bases, line_delay_s, options,
+                static_cast<Eigen::Index>(begin), static_cast<Eigen::Index>(end), &out);
+  });
   return out;
 }
 
@@ -247,7 +261,7 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
     block_observations.clear();
     if (intrinsics) intrinsics->AddTo(problem);
     // Plain least squares with the analytic Jacobian: one residual block per run of observations
-    // with the same frame time and span (RsReprojectionGroupCost, with the intrinsics
+    // on the same span, consecutive frames included (RsReprojectionGroupCost, with the intrinsics
     // RsReprojectionIntrinsicsGroupCost), the same sum of squares. Under a robust loss each
     // observation is its own block (the loss applies to a whole block).
     const bool analytic = options.analytic_jacobian;
@@ -271,7 +285,6 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
       member_observations.clear();
     };
     int group_span = -1;
-    double group_frame_time_s = 0.0;
     for (Eigen::Index m = 0; m < observations.uv.rows(); ++m) {
       const Attachment& a = attached[m];
       if (!a.error.ok) continue;
@@ -282,10 +295,9 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
       double* c0 = control + 6 * (a.span - 3);
       const double frame_offset_s = observations.frame_time_s[m] - basis.span_start;
       if (intrinsics && analytic) {
-        if (!group || a.span != group_span || observations.frame_time_s[m] != group_frame_time_s) {
+        if (!group || a.span != group_span) {
           flush_group(group_span);
           group_span = a.span;
-          group_frame_time_s = observations.frame_time_s[m];
         }
         intrinsics_members.emplace_back(basis, camera_model, frame_offset_s, uv, point_w,
                                         a.error.sqrt_information);
@@ -293,10 +305,9 @@ RsSolveSummary SolveLineDelay(const RsObservations& observations, const camera::
         continue;
       }
       if (group && !intrinsics) {
-        if (a.span != group_span || observations.frame_time_s[m] != group_frame_time_s) {
+        if (a.span != group_span) {
           flush_group(group_span);
           group_span = a.span;
-          group_frame_time_s = observations.frame_time_s[m];
         }
         members.emplace_back(basis, cam, frame_offset_s, uv, point_w, a.error.sqrt_information);
         if (options.line_delay_score) member_observations.push_back(static_cast<int>(m));

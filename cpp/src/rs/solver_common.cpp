@@ -11,6 +11,7 @@
 #include <Eigen/SparseCore>
 
 #include "rscalib/core/error.hpp"
+#include "rscalib/core/parallel_ranges.hpp"
 #include "rscalib/rs/error_standardisation.hpp"
 
 namespace rscalib::rs::detail {
@@ -32,56 +33,85 @@ std::unique_ptr<ceres::LossFunction> MakeRobustLoss(const std::string& name, dou
 }
 
 // J^T J (num_cols square) of the residual blocks without their loss, columns of each parameter
-// block from first_column; an empty matrix when a block cannot be evaluated.
+// block from first_column; an empty matrix when a block cannot be evaluated. Plain least squares
+// without manifolds (SchurVariance checks): each block's cost function is evaluated directly, so
+// num_threads threads can share the blocks. The products are placed in one triplet list in block
+// order whatever the thread count, flushed into the sum every kTripletsPerFlush (bounded memory on
+// long videos) at the same blocks: the same matrix to the bit for every thread count.
 Eigen::SparseMatrix<double> NormalMatrix(const ceres::Problem& problem,
                                          const std::vector<ceres::ResidualBlockId>& residual_blocks,
                                          const std::unordered_map<const double*, int>& first_column,
-                                         int num_cols) {
+                                         int num_cols, int num_threads) {
   using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-  std::vector<Eigen::Triplet<double>> triplets;
+  constexpr size_t kTripletsPerFlush = size_t{1} << 22;
   Eigen::SparseMatrix<double> h(num_cols, num_cols);
-  std::vector<double*> parameters;
-  std::vector<RowMajor> jacobians;
-  std::vector<double*> jacobian_ptrs;
-  std::vector<double> residuals;
-  RowMajor stacked, jtj;
-  std::vector<int> columns;
-  constexpr size_t kTripletsPerFlush = size_t{1} << 22;  // bounded memory on long videos
-  for (const ceres::ResidualBlockId id : residual_blocks) {
-    problem.GetParameterBlocksForResidualBlock(id, &parameters);
-    const int rows = problem.GetCostFunctionForResidualBlock(id)->num_residuals();
-    int width = 0;
-    jacobians.resize(parameters.size());
-    jacobian_ptrs.resize(parameters.size());
-    columns.clear();
-    for (size_t b = 0; b < parameters.size(); ++b) {
-      const int size = problem.ParameterBlockSize(parameters[b]);
-      jacobians[b].resize(rows, size);
-      jacobian_ptrs[b] = jacobians[b].data();
-      const int first = first_column.at(parameters[b]);
-      for (int c = 0; c < size; ++c) columns.push_back(first + c);
-      width += size;
-    }
-    residuals.resize(rows);
-    double cost = 0.0;
-    if (!problem.EvaluateResidualBlock(id, false, &cost, residuals.data(), jacobian_ptrs.data()))
-      return {};
-    stacked.resize(rows, width);
-    for (size_t b = 0, col = 0; b < parameters.size(); col += jacobians[b].cols(), ++b)
-      stacked.middleCols(static_cast<Eigen::Index>(col), jacobians[b].cols()) = jacobians[b];
-    jtj.noalias() = stacked.transpose() * stacked;
-    for (int i = 0; i < width; ++i)
-      for (int j = 0; j < width; ++j) triplets.emplace_back(columns[i], columns[j], jtj(i, j));
-    if (triplets.size() >= kTripletsPerFlush) {
-      Eigen::SparseMatrix<double> part(num_cols, num_cols);
-      part.setFromTriplets(triplets.begin(), triplets.end());
-      h += part;
-      triplets.clear();
+  // Each block's width (its parameters' columns): where its width^2 triplets go.
+  const size_t num_blocks = residual_blocks.size();
+  std::vector<size_t> width(num_blocks, 0);
+  {
+    std::vector<double*> parameters;
+    for (size_t k = 0; k < num_blocks; ++k) {
+      problem.GetParameterBlocksForResidualBlock(residual_blocks[k], &parameters);
+      for (double* block : parameters) width[k] += problem.ParameterBlockSize(block);
     }
   }
-  Eigen::SparseMatrix<double> part(num_cols, num_cols);
-  part.setFromTriplets(triplets.begin(), triplets.end());
-  h += part;
+  std::vector<Eigen::Triplet<double>> triplets;
+  std::vector<char> failed(num_blocks, 0);
+  size_t begin = 0;
+  while (begin < num_blocks) {
+    // A round: the blocks up to the one whose triplets reach the flush size (as one pass would).
+    size_t end = begin, count = 0;
+    std::vector<size_t> offset;
+    while (end < num_blocks && count < kTripletsPerFlush) {
+      offset.push_back(count);
+      count += width[end] * width[end];
+      ++end;
+    }
+    triplets.resize(count);
+    ParallelRanges(end - begin, num_threads, 64, [&](size_t first, size_t last) {
+      std::vector<double*> parameters;
+      std::vector<RowMajor> jacobians;
+      std::vector<double*> jacobian_ptrs;
+      std::vector<double> residuals;
+      std::vector<int> columns;
+      RowMajor stacked, jtj;
+      for (size_t k = begin + first; k < begin + last; ++k) {
+        const ceres::ResidualBlockId id = residual_blocks[k];
+        problem.GetParameterBlocksForResidualBlock(id, &parameters);
+        const ceres::CostFunction* cost = problem.GetCostFunctionForResidualBlock(id);
+        const int rows = cost->num_residuals();
+        jacobians.resize(parameters.size());
+        jacobian_ptrs.resize(parameters.size());
+        columns.clear();
+        for (size_t b = 0; b < parameters.size(); ++b) {
+          const int size = problem.ParameterBlockSize(parameters[b]);
+          jacobians[b].resize(rows, size);
+          jacobian_ptrs[b] = jacobians[b].data();
+          const int first_col = first_column.at(parameters[b]);
+          for (int c = 0; c < size; ++c) columns.push_back(first_col + c);
+        }
+        residuals.resize(rows);
+        if (!cost->Evaluate(parameters.data(), residuals.data(), jacobian_ptrs.data())) {
+          failed[k] = 1;
+          continue;
+        }
+        const int cols = static_cast<int>(columns.size());
+        stacked.resize(rows, cols);
+        for (size_t b = 0, col = 0; b < parameters.size(); col += jacobians[b].cols(), ++b)
+          stacked.middleCols(static_cast<Eigen::Index>(col), jacobians[b].cols()) = jacobians[b];
+        jtj.noalias() = stacked.transpose() * stacked;
+        Eigen::Triplet<double>* out = triplets.data() + offset[k - begin];
+        for (int i = 0; i < cols; ++i)
+          for (int j = 0; j < cols; ++j) *out++ = {columns[i], columns[j], jtj(i, j)};
+      }
+    });
+    for (size_t k = begin; k < end; ++k)
+      if (failed[k]) return {};
+    Eigen::SparseMatrix<double> part(num_cols, num_cols);
+    part.setFromTriplets(triplets.begin(), triplets.end());
+    h += part;
+    begin = end;
+  }
   return h;
 }
 
@@ -175,7 +205,7 @@ std::optional<double> SchurVariance(
       column += problem->ParameterBlockSize(block);
     }
   }
-  SparseMatrix h = NormalMatrix(*problem, residual_blocks, first_column, num_cols);
+  SparseMatrix h = NormalMatrix(*problem, residual_blocks, first_column, num_cols, num_threads);
   if (h.rows() != num_cols) return std::nullopt;
   ceres::Problem::EvaluateOptions evaluate_options;
   evaluate_options.parameter_blocks = blocks;

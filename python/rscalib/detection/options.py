@@ -32,7 +32,7 @@ class DetectOptions:
     subpix_window_px: Optional[int] = None  # cornerSubPix half-window; None: from the grid step
     check_outer_ring: bool = True       # checkerboards: the squares around the found grid must alternate
     refine_circles: bool = True         # circle grids: grey-level centroid instead of the blob detector's
-    full_detection_every: int = 20      # checkerboards in videos: track between full detections (tracking.py); 1 = off
+    full_detection_every: int = 40      # checkerboards in videos: track between full detections (tracking.py); 1 = off
     # how it runs
     workers: Optional[int] = None       # processes (None: the usable cores; in this process for short inputs)
     cache: bool = True                  # reuse the detections of the same bytes, target and settings

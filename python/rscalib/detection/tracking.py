@@ -7,7 +7,8 @@ The first frame of a run is detected from scratch (Detector.detect). Each later 
 predicted from the board's place in the two frames before it: the image-to-image homography of
 the last step applied once more per frame (constant velocity; over up to MAX_GAP_FRAMES frames
 without a full board), or the last corners if only one frame is known.
-A wide cornerSubPix pass (half-window 0.4 grid steps) pulls the prediction onto the corners;
+A wide cornerSubPix pass (half-window 0.4 grid steps, on a half-resolution copy when the grid
+step is at least HALF_RES_MIN_STEP_PX) pulls the prediction onto the corners;
 the detector's own refinement and checks follow (Detector.refine_checkerboard: cornerSubPix
 with the full detection's window, ids, blur, local geometry, here with a stricter residual
 bound). The track is then verified:
@@ -51,6 +52,8 @@ WIDE_WINDOW_STEPS = 0.4   # first sub-pixel pass from the prediction: half-windo
 OUTSIDE_STEPS = 0.1       # a corner this far (grid steps) beyond the border by the homography of the seen ones is
                           # not in the image (lens distortion moves it far less over the one step it extrapolates)
 MAX_GAP_FRAMES = 3        # frames a track is extrapolated over (frames with no full board, e.g. it left the image)
+HALF_RES_MIN_STEP_PX = 16.0  # the wide pass runs on a half-resolution copy from this grid step: a quarter of the
+                             # pixels for a start the full-resolution refinement moves by < 0.01 px (docs/formulation.md §16)
 
 
 def run_length(target: Target, options: DetectOptions) -> int:
@@ -159,11 +162,19 @@ class CheckerboardTracker:
         numberings = before[self._reindexings]   # (k, rows * cols, 2)
         difference = numberings - last
         before = numberings[int(np.argmin(np.einsum("kij,kij->k", difference, difference)))]
-        step, _ = cv2.findHomography(before, last, 0)
+        step = self._corner_homography(before, last)
         if step is None or not np.all(np.isfinite(step)):
             return last if index == last_index + 1 else None
         predicted = cv2.perspectiveTransform(last.reshape(-1, 1, 2), np.linalg.matrix_power(step, index - last_index))
         return predicted.reshape(-1, 2)
+
+    def _corner_homography(self, before: np.ndarray, after: np.ndarray) -> np.ndarray:
+        """The homography that maps the grid's four outer corners in `before` onto those in `after`
+        (whole grids, one numbering): exact through four points, a tenth of a least-squares fit over
+        every corner in time, and the prediction it makes is only a start for the wide pass."""
+        rows, cols = self.grid_shape
+        outer = [0, cols - 1, (rows - 1) * cols, rows * cols - 1]
+        return cv2.getPerspectiveTransform(before[outer].astype(np.float32), after[outer].astype(np.float32))
 
     def _remember(self, index: int, uv: np.ndarray) -> None:
         """The board's corners in frame `index` (detected, tracked, or estimated from its visible
@@ -275,10 +286,17 @@ def _even_corners(shape: tuple) -> np.ndarray:
 def _wide_subpix(gray: np.ndarray, uv: np.ndarray, grid_shape: tuple, step: Optional[float] = None) -> np.ndarray:
     """cornerSubPix with a half-window of WIDE_WINDOW_STEPS grid steps (step: the grid's
     smallest, from uv as a whole grid if not given): pulls predicted corners a few px off
-    onto the corners."""
+    onto the corners. From a grid step of HALF_RES_MIN_STEP_PX it runs on the image's first
+    pyramid level (pixel centres: full = 2 x half), a quarter of the pixels: the refinement
+    that follows at full resolution sets the final places."""
     step = _min_step(uv.reshape(*grid_shape, 2)) if step is None else step
-    half_window = int(np.clip(round(WIDE_WINDOW_STEPS * step), 2, 60))
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.05)
+    if step >= HALF_RES_MIN_STEP_PX:
+        half_window = int(np.clip(round(0.5 * WIDE_WINDOW_STEPS * step), 2, 30))
+        start = (0.5 * uv).astype(np.float32).reshape(-1, 1, 2)
+        found = cv2.cornerSubPix(cv2.pyrDown(gray), start, (half_window, half_window), (-1, -1), criteria)
+        return 2.0 * found.reshape(-1, 2).astype(np.float64)
+    half_window = int(np.clip(round(WIDE_WINDOW_STEPS * step), 2, 60))
     return cv2.cornerSubPix(gray, uv.astype(np.float32).reshape(-1, 1, 2), (half_window, half_window),
                             (-1, -1), criteria).reshape(-1, 2).astype(np.float64)
 

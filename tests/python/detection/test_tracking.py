@@ -125,7 +125,7 @@ def test_saddle_check(sequence):
 
 def test_tracking_is_part_of_the_cache_key_and_only_for_checkerboards():
     assert DetectOptions().fingerprint() != DetectOptions(full_detection_every=1).fingerprint()
-    assert run_length(BOARD, DetectOptions()) == 20 and run_length(BOARD, DetectOptions(full_detection_every=1)) == 1
+    assert run_length(BOARD, DetectOptions()) == 40 and run_length(BOARD, DetectOptions(full_detection_every=1)) == 1
     circles = target_from_dict({"target_type": "circlegrid", "targetCols": 7, "targetRows": 5,
                                 "spacingMeters": 0.035, "asymmetricGrid": False})
     assert run_length(circles, DetectOptions()) == 1

@@ -90,7 +90,10 @@ def test_a_robust_loss_gets_the_ceres_covariance(problem):
     schur, _ = _solve(problem, perturb=False, max_iterations=0, robust_loss="huber", schur_variance=True)
     ceres, _ = _solve(problem, perturb=False, max_iterations=0, robust_loss="huber", schur_variance=False)
     assert schur.covariance_ok
-    assert schur.line_delay_std_s == ceres.line_delay_std_s
+    # the same computation (Ceres' sparse-QR covariance); its last bit can differ between two calls
+    # in one process (seen since the attachment runs through ParallelRanges, one thread or two), so
+    # not ==: the Schur path agrees with it only to ~1e-6 (the test above)
+    assert schur.line_delay_std_s == pytest.approx(ceres.line_delay_std_s, rel=1e-13)
 
 
 def test_sigma_d_without_the_motion_prior(problem):
@@ -233,3 +236,16 @@ def test_a_start_trajectory_ends_where_the_pnp_start_does(problem):
     assert abs(seeded.line_delay_s - default.line_delay_s) < 0.05 * default.line_delay_std_s
     assert seeded.history[-1].segments_split == 0 and len(seeded.history) <= 2
     assert seeded.num_segments >= default.num_segments
+
+
+def test_the_thread_count_does_not_change_the_attachment_or_sigma_d(problem):
+    """The observations' attachment and the normal matrix of sigma_d are shared between threads
+    (rscalib/core/parallel_ranges.hpp) in contiguous ranges: one thread and two give the same numbers
+    to the bit at a fixed estimate."""
+    one, _ = _solve(problem, perturb=False, max_iterations=0, num_threads=1)
+    two, _ = _solve(problem, perturb=False, max_iterations=0, num_threads=2)
+    assert one.covariance_ok and two.covariance_ok
+    assert one.line_delay_std_s == two.line_delay_std_s
+    np.testing.assert_array_equal(np.asarray(one.residual_px), np.asarray(two.residual_px))
+    np.testing.assert_array_equal(np.asarray(one.standardised_sq), np.asarray(two.standardised_sq))
+    assert one.measurement_cost == two.measurement_cost
