@@ -10,7 +10,7 @@ OpenCV's writer, closer to the decode cost of a phone's H.264):
   (b) the naive single-process loop: cv2.VideoCapture.read, grey, cv2.findChessboardCornersSB
       (on the first --naive-frames frames);
   (c) detect_video with full detection in every frame (DetectOptions(full_detection_every=1));
-  (d) detect_video with tracking (the default, a full detection every 20 frames);
+  (d) detect_video with tracking (the default, a full detection every 40 frames);
   (c) and (d) on all usable cores, worker start-up included, no cache, each also as CPU ms per
       frame of all its processes (this one and the joined workers: os.times), with the load average;
   and, robust to other load on the machine, the CPU time per frame in one process (first 200
