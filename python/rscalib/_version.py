@@ -1,7 +1,4 @@
-"""The installed package's version (one source: pyproject.toml via the package metadata)."""
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("rscalib")
-except PackageNotFoundError:  # a source tree without metadata: the version compiled into _core
-    from ._core import __version__  # noqa: F401
+"""The installed package's version: compiled into _core from CMakeLists.txt's project version, which
+tests/python/cli/test_cli.py keeps equal to pyproject.toml's (the package metadata; reading that cost
+25 ms of every import, the detection workers' too)."""
+from ._core import __version__  # noqa: F401
