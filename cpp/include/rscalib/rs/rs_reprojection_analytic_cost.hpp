@@ -50,10 +50,10 @@ class RsReprojectionAnalyticCost : public ceres::SizedCostFunction<2, 6, 6, 6, 6
 };
 
 // The errors of several observations on the same span (the points of the frames that fall on it,
-// as the solver groups them) in one residual block of 2k rows: the same numbers as k RsReprojectionAnalyticCost blocks,
-// with Ceres' per-block work (evaluation, Jacobian scatter, J^T J) done once per group. Only for
-// plain least squares: a robust loss applies to a whole block, so the solver keeps one block per
-// observation then.
+// as the solver groups them) in one residual block of 2k rows: the same numbers as k
+// RsReprojectionAnalyticCost blocks, with Ceres' per-block work (evaluation, Jacobian scatter,
+// J^T J) done once per group. Only for plain least squares: a robust loss applies to a whole
+// block, so the solver keeps one block per observation then.
 class RsReprojectionGroupCost : public ceres::CostFunction {
  public:
   explicit RsReprojectionGroupCost(std::vector<AnalyticReprojectionTerm> terms);
