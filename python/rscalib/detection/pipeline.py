@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import checks
 from .._progress import Progress, ProgressArg
-from ..io.limits import bounded_workers, usable_cores
+from ..io.limits import bounded_workers, source_frame_size, usable_cores
 from ..io.targets import Target, load_target
 from ..io.video import FrameSource, VideoSegment, open_source
 from ..observations import Observations
@@ -75,6 +75,7 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
         target = load_target(target)
     frames = open_source(source)
     workers = bounded_workers(frames, options.workers)  # frame sizes from the headers: refused or bounded before decoding
+    frame_size, _ = source_frame_size(frames)   # a run's frames are bounded in bytes (tracking.run_length)
     started = time.perf_counter()
     cache_file = None
     cache_problems: list = []   # a bad cache file: one line each, reported with the result
@@ -90,10 +91,11 @@ def detect_video(source: Union[str, Path, Sequence], target: Union[Target, str, 
             cached.detect_time_s = time.perf_counter() - started
             return cached
     try:
-        result = _detect_frames(frames, target, options, workers, progress, alongside, on_frames)
+        result = _detect_frames(frames, target, options, workers, progress, alongside, on_frames, frame_size)
     except BrokenProcessPool:
         # e.g. a worker killed for memory, or a __main__ that spawn cannot re-import
-        result = _detect_frames(open_source(source), target, options, 1, progress, on_frames=on_frames)
+        result = _detect_frames(open_source(source), target, options, 1, progress, on_frames=on_frames,
+                                frame_size=frame_size)
         result.warnings.append("detection workers failed; detected in one process instead")
     result.detect_time_s = time.perf_counter() - started
     if cache_file is not None:
@@ -317,7 +319,7 @@ def _worker_ready() -> None:
 
 def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, workers: Optional[int],
                    progress: bool, alongside: Optional[Callable[[], None]] = None,
-                   on_frames: Optional[FramesCallback] = None) -> DetectionResult:
+                   on_frames: Optional[FramesCallback] = None, frame_size: Optional[tuple] = None) -> DetectionResult:
     estimate = frames.frame_count_estimate
     if workers is None:
         # starting a worker costs ~0.5 s, a frame 5-60 ms: short inputs are faster in-process
@@ -328,7 +330,7 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
         workers = 1  # a script read from stdin: spawned workers could not re-import it
     # runs of consecutive frames by index (run = index // run_frames), each tracked within itself
     # (tracking.py): a worker takes whole runs; in this process they stream through a RunDetector
-    run_frames = run_length(target, options)
+    run_frames = run_length(target, options, frame_size)
     pool = _start_pool(workers, target, options) if workers > 1 else None
     detector = RunDetector(Detector(target, options), run_frames) if pool is None else None
     plan = segment_plan(estimate, workers, run_frames) if frames.kind == "video" else None

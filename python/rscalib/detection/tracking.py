@@ -52,14 +52,20 @@ WIDE_WINDOW_STEPS = 0.4   # first sub-pixel pass from the prediction: half-windo
 OUTSIDE_STEPS = 0.1       # a corner this far (grid steps) beyond the border by the homography of the seen ones is
                           # not in the image (lens distortion moves it far less over the one step it extrapolates)
 MAX_GAP_FRAMES = 3        # frames a track is extrapolated over (frames with no full board, e.g. it left the image)
+RUN_MAX_GREY_BYTES = 128 << 20  # a run's frames at most: runs of 40 640x480 or 1080p frames, 16 of 4K
 HALF_RES_MIN_STEP_PX = 16.0  # the wide pass runs on a half-resolution copy from this grid step: a quarter of the
                              # pixels for a start the full-resolution refinement moves by < 0.01 px (docs/formulation.md §16)
 
 
-def run_length(target: Target, options: DetectOptions) -> int:
-    """Frames per independently processed run: full_detection_every for tracked targets, else 1."""
+def run_length(target: Target, options: DetectOptions, frame_size: Optional[tuple] = None) -> int:
+    """Frames per independently processed run: full_detection_every for tracked targets, else 1; with
+    the frames' (width, height), at most RUN_MAX_GREY_BYTES of grey frames (a worker holds a run's
+    frames when they are shipped to it: 16 frames of 4K, 4 of 27 MP stills)."""
     if target.target_type in TRACKED_TARGETS and options.full_detection_every > 1:
-        return int(options.full_detection_every)
+        frames = int(options.full_detection_every)
+        if frame_size is not None:
+            frames = min(frames, max(1, RUN_MAX_GREY_BYTES // max(1, int(frame_size[0]) * int(frame_size[1]))))
+        return frames
     return 1
 
 

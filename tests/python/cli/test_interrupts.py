@@ -37,7 +37,8 @@ def rscalib_env() -> dict:
 @pytest.fixture(scope="module")
 def video(tmp_path_factory):
     out = tmp_path_factory.mktemp("sim")
-    subprocess.run([sys.executable, "-m", "rscalib", "simulate", "--out", str(out), "--duration", "6",
+    # 11 s, 330 frames: at least 4 runs of 40 frames per worker, so the workers decode their own segments
+    subprocess.run([sys.executable, "-m", "rscalib", "simulate", "--out", str(out), "--duration", "11",
                     "--supersample", "1", "--quiet"], check=True, env=rscalib_env(), timeout=300)
     return out
 

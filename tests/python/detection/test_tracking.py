@@ -126,6 +126,11 @@ def test_saddle_check(sequence):
 def test_tracking_is_part_of_the_cache_key_and_only_for_checkerboards():
     assert DetectOptions().fingerprint() != DetectOptions(full_detection_every=1).fingerprint()
     assert run_length(BOARD, DetectOptions()) == 40 and run_length(BOARD, DetectOptions(full_detection_every=1)) == 1
+    # a worker holds a run's frames when they are shipped to it: at most RUN_MAX_GREY_BYTES of grey pixels
+    assert run_length(BOARD, DetectOptions(), (1920, 1080)) == 40
+    assert run_length(BOARD, DetectOptions(), (3840, 2160)) == 16
+    assert run_length(BOARD, DetectOptions(), (6000, 4500)) == 4
+    assert run_length(BOARD, DetectOptions(), (40000, 30000)) == 1
     circles = target_from_dict({"target_type": "circlegrid", "targetCols": 7, "targetRows": 5,
                                 "spacingMeters": 0.035, "asymmetricGrid": False})
     assert run_length(circles, DetectOptions()) == 1
