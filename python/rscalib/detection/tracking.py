@@ -54,7 +54,8 @@ OUTSIDE_STEPS = 0.1       # a corner this far (grid steps) beyond the border by 
 MAX_GAP_FRAMES = 3        # frames a track is extrapolated over (frames with no full board, e.g. it left the image)
 RUN_MAX_GREY_BYTES = 128 << 20  # a run's frames at most: runs of 40 640x480 or 1080p frames, 16 of 4K
 HALF_RES_MIN_STEP_PX = 16.0  # the wide pass runs on a half-resolution copy from this grid step: a quarter of the
-                             # pixels for a start the full-resolution refinement moves by < 0.01 px (docs/formulation.md §16)
+                             # pixels; the full-resolution refinement then ends on the same corners within a median
+                             # 0.004 px a frame (docs/formulation.md §16)
 
 
 def run_length(target: Target, options: DetectOptions, frame_size: Optional[tuple] = None) -> int:
