@@ -91,8 +91,8 @@ def test_a_robust_loss_gets_the_ceres_covariance(problem):
     ceres, _ = _solve(problem, perturb=False, max_iterations=0, robust_loss="huber", schur_variance=False)
     assert schur.covariance_ok
     # the same computation (Ceres' sparse-QR covariance); its last bit can differ between two calls
-    # in one process (seen since the attachment runs through ParallelRanges, one thread or two), so
-    # not ==: the Schur path agrees with it only to ~1e-6 (the test above)
+    # in one process (seen since stop 44's solver build, with one thread and with the attachment run
+    # serially too: Ceres', not ours), so not ==: the Schur path agrees with it only to ~1e-6 (above)
     assert schur.line_delay_std_s == pytest.approx(ceres.line_delay_std_s, rel=1e-13)
 
 
