@@ -6,7 +6,7 @@
 Speed, per size and codec (a rendered 9x6 checkerboard video, `rscalib simulate --supersample 1`:
 FFV1, lossless and slow to decode; "mp4v": the same frames re-encoded as MPEG-4 Part 2 by
 OpenCV's writer, closer to the decode cost of a phone's H.264):
-  (a) decode only: FrameSource.frames(gray=True), the reader detection uses;
+  (a) decode only: FrameSource.frames(gray=True, luma=True), the reader detection uses;
   (b) the naive single-process loop: cv2.VideoCapture.read, grey, cv2.findChessboardCornersSB
       (on the first --naive-frames frames);
   (c) detect_video with full detection in every frame (DetectOptions(full_detection_every=1));
@@ -109,7 +109,7 @@ def rate(source, target, options) -> tuple[float, object]:
 def cpu_ms_per_frame(video: Path, target, frames: int = 200) -> dict:
     """CPU time per frame in this process (all its threads): decode, full, tracked detection."""
     started, images = time.process_time(), []
-    for frame in open_source(video).frames(gray=True):
+    for frame in open_source(video).frames(gray=True, luma=True):
         images.append((frame.index, frame.image))
         if len(images) == frames:
             break
@@ -126,7 +126,7 @@ def cpu_ms_per_frame(video: Path, target, frames: int = 200) -> dict:
 def speed_row(folder: Path, video: Path, naive_frames: int) -> dict:
     target = load_target(folder / "target.yaml")
     started = time.perf_counter()
-    decoded = sum(1 for _ in open_source(video).frames(gray=True))
+    decoded = sum(1 for _ in open_source(video).frames(gray=True, luma=True))
     decode_fps = decoded / (time.perf_counter() - started)
 
     capture = cv2.VideoCapture(str(video), cv2.CAP_FFMPEG)
@@ -184,7 +184,7 @@ def tracked_share(source, target) -> dict:
     detector = Detector(target, TRACKED)
     counts = {"full": 0, "tracked": 0, "track_rejected": 0, "left_image": 0}
     tracker = None
-    for k, frame in enumerate(f for f in open_source(source).frames(gray=True) if f.image is not None):
+    for k, frame in enumerate(f for f in open_source(source).frames(gray=True, luma=True) if f.image is not None):
         if k % TRACKED.full_detection_every == 0:
             if tracker is not None:
                 counts = {key: counts[key] + tracker.counts[key] for key in counts}

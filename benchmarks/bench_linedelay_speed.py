@@ -6,7 +6,7 @@ For each duration: a rendered 30 fps, 640x480, 9x6-checkerboard video of a hand-
 (`rscalib simulate --supersample 1 --seed 1`, cached in --videos; codec "ffv1" is the lossless render,
 slow to decode, "mp4v" the same frames re-encoded as MPEG-4 Part 2, closer to a phone's decode cost:
 benchmarks/_common.mpeg4), then, one after the other:
-  (a) decode only (FrameSource.frames(gray=True), the reader detection uses);
+  (a) decode only (FrameSource.frames(gray=True, luma=True), the reader detection uses);
   (b) the naive single-process loop: decode + cv2.findChessboardCornersSB on every frame
       (only for --naive-durations: 50 s a minute of video), --naive-repeats times (3): the ratio is
       against their median, since the loop itself moves by +-20 % with the machine's load;
@@ -48,7 +48,7 @@ def render(videos: Path, duration_s: int) -> Path:
 
 def decode_only_s(video: Path) -> tuple[float, int]:
     started, count = time.perf_counter(), 0
-    for _ in open_source(video).frames(gray=True):
+    for _ in open_source(video).frames(gray=True, luma=True):
         count += 1
     return time.perf_counter() - started, count
 

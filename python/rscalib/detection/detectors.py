@@ -40,9 +40,10 @@ from .options import DetectOptions
 from .quality import edge_width_px, local_homography_residual
 
 # Bump when a change to the detectors or checks changes their output: it invalidates caches.
-DETECTOR_VERSION = "4"  # 2: runs by frame index, tracks across frames without a full board (issue 17);
+DETECTOR_VERSION = "5"  # 2: runs by frame index, tracks across frames without a full board (issue 17);
 # 3: a track whose refinement put a corner back on its start goes to full detection;
-# 4: runs of 40 frames, the tracker's wide pass at half resolution, its prediction from the outer corners
+# 4: runs of 40 frames, the tracker's wide pass at half resolution, its prediction from the outer corners;
+# 5: a video's grey frames from the decoder's luma plane (rscalib.io.video.luma_plan)
 
 DROP_REASONS = ("no_target", "wrong_count", "blur", "outlier_geometry", "outer_ring", "bad_timestamp",
                 "unreadable", "image_size", "detector_error")

@@ -24,7 +24,7 @@ from .. import checks
 from .._progress import Progress, ProgressArg
 from ..io.limits import bounded_workers, source_frame_size, usable_cores
 from ..io.targets import Target, load_target
-from ..io.video import FrameSource, VideoSegment, open_source
+from ..io.video import FrameSource, LumaPlan, VideoSegment, open_source
 from ..observations import Observations
 from .cache import default_cache_dir, load_cache, save_cache
 from .detectors import DETECTOR_VERSION, DROP_REASONS, Detector, FrameDetection
@@ -170,10 +170,10 @@ def segment_plan(frame_count: Optional[int], workers: int, run_frames: int) -> O
 
 
 def _worker_detect_segment(path: str, fps: Optional[float], start: int, stop: Optional[int], run_frames: int,
-                           decoder_threads: Optional[int] = None) -> dict:
+                           decoder_threads: Optional[int] = None, luma: Optional[LumaPlan] = None) -> dict:
     """Decode frames start .. stop - 1 here and detect them as one sequential pass would: runs of
     run_frames frames by index, frames of another size than the segment's first dropped."""
-    segment = VideoSegment(path, fps, start, stop, decoder_threads)
+    segment = VideoSegment(path, fps, start, stop, decoder_threads, luma)
     runs = RunDetector(_WORKER_DETECTOR, run_frames)
     frames, size = [], None
     for frame in segment.frames(gray=True):
@@ -252,6 +252,7 @@ def _detect_segments(frames: FrameSource, plan: list, pool, run_frames: int, wor
     # FFmpeg's threads: the cores the workers leave (one each when they fill the machine: FFmpeg's frame
     # threads on top of busy cores cost 15-20 % more CPU for the same frames)
     decoder_threads = max(1, usable_cores() // max(1, workers))
+    luma = frames.luma_plan()   # checked once here, on the first frame, for every segment
     previous, last_time_s = None, None
     non_increasing = 0
     while True:
@@ -261,7 +262,7 @@ def _detect_segments(frames: FrameSource, plan: list, pool, run_frames: int, wor
                 break
             with _sigint_blocked():
                 pending.append(pool.submit(_worker_detect_segment, str(frames.paths[0]), frames.fps_nominal,
-                                           task[0], task[1], run_frames, decoder_threads))
+                                           task[0], task[1], run_frames, decoder_threads, luma))
         if alongside is not None:
             alongside()
             alongside = None
@@ -357,8 +358,8 @@ def _detect_frames(frames: FrameSource, target: Target, options: DetectOptions, 
         raise
     finally:
         cv2.setNumThreads(cv_threads)
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+        if pool is not None:   # every task is done: the idle workers exit while the caller goes on
+            pool.shutdown(wait=False, cancel_futures=True)
     return collected.result(frames, target)
 
 
@@ -383,7 +384,7 @@ def _decode_here(frames: FrameSource, pool, detector: Optional[RunDetector], run
             collected.record(info, detection)
         collected.hand_on()
 
-    decoded = frames.frames(gray=True)
+    decoded = frames.frames(gray=True, luma=True)
     if pool is not None:  # decode while the workers detect; in-process, one frame at a time
         decoded = _decoded_ahead(decoded, run_frames)
     for frame in decoded:

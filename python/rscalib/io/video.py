@@ -11,10 +11,13 @@ timestamps_source "frame index", which the engines that need time refuse). Nothi
 """
 from __future__ import annotations
 
+import contextlib
+import functools
 import glob
 import hashlib
 import os
 import re
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Optional, Sequence, Union
@@ -54,11 +57,18 @@ class FrameSource:
     times_s: Optional[np.ndarray] = None        # image sequences: the time of every image
     warnings: list = field(default_factory=list)
 
-    def frames(self, gray: bool = False) -> Iterator[Frame]:
+    def frames(self, gray: bool = False, luma: bool = False) -> Iterator[Frame]:
+        """The frames, decoded one at a time. gray: one-channel images; luma (with gray): a video's
+        grey frames straight from the decoder's luma plane when its first frame shows that to be the
+        grey image (luma_plan), else through BGR as without it."""
         if self.kind == "images":
             yield from self._images(gray)
         else:
-            yield from self._video(gray)
+            yield from self._video(gray, self.luma_plan() if gray and luma else None)
+
+    def luma_plan(self) -> Optional[LumaPlan]:
+        """A video's LumaPlan (None: its grey frames come through BGR; always None for images)."""
+        return luma_plan(self.paths[0]) if self.kind == "video" else None
 
     def content_hash(self) -> str:
         """SHA-256 of the bytes (streamed) of the video, or of every image and the timestamps."""
@@ -83,14 +93,15 @@ class FrameSource:
             yield Frame(index, float(self.times_s[index]), image, Path(path).name,
                         None if image is not None else "unreadable")
 
-    def _video(self, gray: bool) -> Iterator[Frame]:
+    def _video(self, gray: bool, luma: Optional[LumaPlan] = None) -> Iterator[Frame]:
         capture = _open_capture(self.paths[0])
         clock = _ContainerClock(self.fps_nominal)
         count = 0
         try:
-            for frame in decode_frames(capture, clock, 0, None, gray):
-                count += 1
-                yield frame
+            with _luma_reading(capture, luma) as reading:
+                for frame in decode_frames(capture, clock, 0, None, gray, reading):
+                    count += 1
+                    yield frame
         finally:
             capture.release()
         if count == 0:
@@ -108,23 +119,33 @@ class FrameSource:
 
 
 def decode_frames(capture: cv2.VideoCapture, clock: _ContainerClock, first_index: int, stop: Optional[int],
-                  gray: bool) -> Iterator[Frame]:
+                  gray: bool, luma: Optional[LumaReading] = None) -> Iterator[Frame]:
     """Frames first_index, first_index + 1, ... (up to stop, or the end) from a capture standing
-    at first_index, with their times from `clock`."""
+    at first_index, with their times from `clock`; luma: the capture gives luma planes (_luma_reading)."""
     index = first_index
     while (stop is None or index < stop) and capture.grab():
         time_s = clock.time_of(index, capture.get(cv2.CAP_PROP_POS_MSEC))
         if time_s is None:
             yield Frame(index, float("nan"), None, f"frame {index}", "bad_timestamp")
         else:
-            ok, image = capture.retrieve()
-            if not ok or image is None:
+            image = _retrieve(capture, gray, luma)
+            if image is None:
                 yield Frame(index, time_s, None, f"frame {index}", "unreadable")
             else:
-                if gray and image.ndim == 3:
-                    image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
                 yield Frame(index, time_s, image, f"frame {index}")
         index += 1
+
+
+def _retrieve(capture: cv2.VideoCapture, gray: bool, luma: Optional[LumaReading] = None) -> Optional[np.ndarray]:
+    """The grabbed frame (grey with gray), or None when it cannot be read."""
+    ok, image = capture.retrieve()
+    if not ok or image is None:
+        return None
+    if luma is not None:
+        return luma.grey(image)
+    if gray and image.ndim == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    return image
 
 
 class VideoSegment:
@@ -138,9 +159,10 @@ class VideoSegment:
     must increase, as in one sequential pass."""
 
     def __init__(self, path, fps: Optional[float], start: int, stop: Optional[int],
-                 decoder_threads: Optional[int] = None):
+                 decoder_threads: Optional[int] = None, luma: Optional[LumaPlan] = None):
         self.path, self.fps, self.start, self.stop = path, fps, start, stop
         self.decoder_threads = decoder_threads   # FFmpeg's (None: its default, one per core)
+        self.luma = luma                          # grey frames from the luma plane (FrameSource.luma_plan)
         self.first: Optional[tuple] = None
         self.after: Optional[tuple] = None
         self.last_time_s: Optional[float] = None
@@ -153,18 +175,17 @@ class VideoSegment:
         try:
             if self.start > 0 and not capture.set(cv2.CAP_PROP_POS_FRAMES, self.start):
                 return  # first stays None: not verifiable
-            for frame in decode_frames(capture, clock, self.start, self.stop, gray):
-                if frame.index == self.start and frame.image is not None:
-                    self.first = (frame.time_s, frame_digest(frame.image))
-                yield frame
-            if self.stop is not None and capture.grab():
-                ok, image = capture.retrieve()
-                if ok and image is not None:
-                    if gray and image.ndim == 3:
-                        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-                    self.after = (capture.get(cv2.CAP_PROP_POS_MSEC) * 1e-3, frame_digest(image))
-                else:
-                    self.after = (float("nan"), "unreadable")
+            with _luma_reading(capture, self.luma if gray else None) as luma:
+                for frame in decode_frames(capture, clock, self.start, self.stop, gray, luma):
+                    if frame.index == self.start and frame.image is not None:
+                        self.first = (frame.time_s, frame_digest(frame.image))
+                    yield frame
+                if self.stop is not None and capture.grab():
+                    image = _retrieve(capture, gray, luma)
+                    if image is not None:
+                        self.after = (capture.get(cv2.CAP_PROP_POS_MSEC) * 1e-3, frame_digest(image))
+                    else:
+                        self.after = (float("nan"), "unreadable")
         finally:
             capture.release()
             self.last_time_s, self.non_increasing, self.no_container_times = clock.last, clock.non_increasing, clock.fallback
@@ -175,6 +196,126 @@ def frame_digest(image: np.ndarray) -> str:
     digest = hashlib.blake2b(np.ascontiguousarray(image).data, digest_size=16)
     digest.update(repr(image.shape).encode())
     return digest.hexdigest()
+
+
+# Grey frames from the decoder's luma plane (docs/formulation.md §16). With CAP_PROP_CONVERT_RGB off,
+# OpenCV's FFmpeg reader returns the decoded picture's first plane as 8-bit. For 8-bit YUV that is luma,
+# the grey image without the YUV -> BGR -> grey round trip (0.47 of 0.95 CPU ms a 640x480 MPEG-4 frame);
+# for 10-bit or packed formats it is not an image at all. So a video uses it only when its first frame's
+# plane, as is or stretched from limited range (16-235, which OpenCV's BGR conversion stretches to
+# 0-255), matches OpenCV's BGR -> grey of that frame, and every capture checks the decoder's format.
+LIMITED_TO_FULL_RANGE = np.clip(np.round((np.arange(256) - 16) * 255.0 / 219.0), 0, 255).astype(np.uint8)
+# The match: mean and 99th-percentile |difference| in grey levels at most these (colour rounding and
+# clipping: 0.2-1.3 mean, p99 2-5 on phone H.264, MJPEG and saturated test patterns; a 10-bit or packed
+# plane ~100), and the other mapping's mean at least LUMA_MARGIN worse (else the range is ambiguous).
+LUMA_MEAN_MAX, LUMA_P99_MAX, LUMA_MARGIN = 2.5, 10.0, 1.0
+
+
+@dataclass(frozen=True)
+class LumaPlan:
+    """How a video's grey frames come from its luma plane: the decoder's pixel format that was
+    checked (OpenCV's FourCC code), the frame size (w, h), and whether the plane is limited range."""
+
+    pixel_format: int
+    frame_size: tuple
+    limited_range: bool
+
+
+class LumaReading:
+    """A capture that gives luma planes (_luma_reading): each retrieved plane made the grey frame."""
+
+    def __init__(self, plan: LumaPlan):
+        self.limited_range = plan.limited_range
+
+    def grey(self, plane: np.ndarray) -> np.ndarray:
+        return stretch_limited_range(plane) if self.limited_range and plane.ndim == 2 else plane
+
+
+def stretch_limited_range(plane: np.ndarray) -> np.ndarray:
+    """LIMITED_TO_FULL_RANGE applied to an 8-bit plane: addWeighted's saturating rounding gives the
+    table's values (no fraction lies within 0.002 of a half) in 0.11 ms a 640x480 frame; cv2.LUT takes 0.26."""
+    return cv2.addWeighted(plane, 255.0 / 219.0, plane, 0.0, -16.0 * 255.0 / 219.0)
+
+
+def luma_plan(path) -> Optional[LumaPlan]:
+    """Whether (and how) a video's grey frames can come from its luma plane, from its first frame;
+    None when they cannot (then through BGR). Remembered per file (path, size, modification time)."""
+    try:
+        stat = os.stat(path)
+    except OSError:
+        return None
+    return _luma_plan(str(path), stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _luma_plan(path: str, size: int, mtime_ns: int) -> Optional[LumaPlan]:
+    del size, mtime_ns   # the cache key
+    try:
+        bgr_capture = _open_capture(path)
+    except InputError:
+        return None
+    try:
+        pixel_format = int(bgr_capture.get(cv2.CAP_PROP_CODEC_PIXEL_FORMAT))
+        ok, bgr = bgr_capture.read()
+    finally:
+        bgr_capture.release()
+    if not ok or bgr is None or bgr.ndim != 3 or bgr.dtype != np.uint8:
+        return None
+    frame_size = (bgr.shape[1], bgr.shape[0])
+    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+    del bgr   # a frame at a time: memory does not depend on the frame count or the check
+    capture = _open_capture(path)
+    try:
+        with _luma_reading(capture, LumaPlan(pixel_format, frame_size, False)) as luma:
+            ok, plane = capture.read() if luma is not None else (False, None)
+    finally:
+        capture.release()
+    if not ok or plane is None or plane.ndim != 2 or plane.dtype != np.uint8 or plane.shape != grey.shape:
+        return None
+    errors = {limited: _difference_levels(stretch_limited_range(plane) if limited else plane, grey)
+              for limited in (False, True)}
+    limited = errors[True][0] < errors[False][0]
+    mean, p99 = errors[limited]
+    if mean > LUMA_MEAN_MAX or p99 > LUMA_P99_MAX or errors[not limited][0] - mean < LUMA_MARGIN:
+        return None
+    return LumaPlan(pixel_format, frame_size, limited)
+
+
+def _difference_levels(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """Mean and 99th percentile of |a - b| (8-bit images), from a histogram: no wide copies."""
+    counts = cv2.calcHist([cv2.absdiff(a, b)], [0], None, [256], [0, 256]).ravel().astype(np.float64)
+    levels = np.arange(counts.size)
+    total = counts.sum()
+    return float(counts @ levels / total), float(np.searchsorted(np.cumsum(counts), 0.99 * total))
+
+
+_quiet_lock = threading.Lock()
+_quiet_readers = 0
+_quiet_saved_level: Optional[int] = None
+
+
+@contextlib.contextmanager
+def _luma_reading(capture: cv2.VideoCapture, plan: Optional[LumaPlan]) -> Iterator[Optional[LumaReading]]:
+    """With a plan whose pixel format this capture's decoder has: the capture switched to luma planes
+    (before its first retrieve) and OpenCV's per-frame warning about them off meanwhile; yields the
+    LumaReading, or None (the capture gives BGR as usual)."""
+    global _quiet_readers, _quiet_saved_level
+    if plan is None or int(capture.get(cv2.CAP_PROP_CODEC_PIXEL_FORMAT)) != plan.pixel_format \
+            or not capture.set(cv2.CAP_PROP_CONVERT_RGB, 0):
+        yield None
+        return
+    with _quiet_lock:   # OpenCV's log level is global: the first reader lowers it, the last restores it
+        if _quiet_readers == 0:
+            _quiet_saved_level = cv2.utils.logging.getLogLevel()
+            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+        _quiet_readers += 1
+    try:
+        yield LumaReading(plan)
+    finally:
+        with _quiet_lock:
+            _quiet_readers -= 1
+            if _quiet_readers == 0 and _quiet_saved_level is not None:
+                cv2.utils.logging.setLogLevel(_quiet_saved_level)
 
 
 class _ContainerClock:
