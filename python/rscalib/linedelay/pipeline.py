@@ -470,7 +470,7 @@ def check_target_early(video: PathLike, target: Target) -> bool:
         return False
     rows, cols = target.grid_shape
     try:
-        seen = probe.early_board(video)
+        seen = probe.early_board(video, expected=(cols, rows))
     except (InputError, OSError):
         return False
     if seen is None:
